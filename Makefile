@@ -1,0 +1,71 @@
+# Relight: developer commands. See README.md.
+#
+#   make test        create .venv on first use (bpy wheel + runtime + test deps), run pytest
+#   make demo        solve the embedded Cornell box, write out/cornell.png
+#   make extension   download the runtime wheels per platform, build dist/relight-*-<platform>.zip
+#   make test-lts    the same tests against Blender 4.2 LTS (bpy 4.2) in .venv-lts
+#   make clean       remove build output and caches (keeps the venvs; `make distclean` removes them)
+
+PYTHON  ?= python3.11
+VENV    ?= .venv
+LTS     ?= .venv-lts
+PYTEST_ARGS ?= -q -p no:cacheprovider
+
+REQ_COMMON := requirements/runtime.txt requirements/test.txt
+REQ_MAIN   := requirements/blender.txt $(REQ_COMMON)
+REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
+
+# The stamp is newer than every requirement file once the venv matches them.
+STAMP     := $(VENV)/.requirements-stamp
+STAMP_LTS := $(LTS)/.requirements-stamp
+
+.PHONY: test demo extension wheels test-lts validate clean distclean venv venv-lts
+
+test: $(STAMP)
+	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) tests
+
+demo: $(STAMP)
+	$(VENV)/bin/python -m relight_addon.demo
+
+venv: $(STAMP)
+venv-lts: $(STAMP_LTS)
+
+$(STAMP): $(REQ_MAIN)
+	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
+	$(VENV)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_MAIN))
+	@touch $@
+
+# bpy 4.2 needs its own venv: one bpy per interpreter.
+$(STAMP_LTS): $(REQ_LTS)
+	@test -x $(LTS)/bin/python || $(PYTHON) -m venv $(LTS)
+	$(LTS)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
+	$(LTS)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_LTS))
+	@touch $@
+
+test-lts: $(STAMP_LTS)
+	$(LTS)/bin/python -c "import bpy; print('bpy', bpy.app.version_string)"
+	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) tests
+
+validate: $(STAMP)
+	$(VENV)/bin/python tools/blender_ext.py validate .
+
+# Unmodified PyPI wheels for every platform of the manifest (never numpy: Blender ships it);
+# missing optional wheels (embreex) are reported and skipped.
+wheels: $(STAMP)
+	$(VENV)/bin/python tools/fetch_wheels.py --dest wheels
+
+extension: wheels
+	$(VENV)/bin/python tools/sync_wheels.py
+	$(VENV)/bin/python tools/blender_ext.py validate .
+	@mkdir -p dist
+	rm -f dist/relight-*.zip
+	$(VENV)/bin/python tools/blender_ext.py build --source-dir . --output-dir dist --split-platforms
+	@ls -l dist/*.zip
+
+clean:
+	rm -rf dist out .cache .pytest_cache
+	find . -path ./$(VENV) -prune -o -path ./$(LTS) -prune -o -name __pycache__ -type d -exec rm -rf {} +
+
+distclean: clean
+	rm -rf wheels $(VENV) $(LTS)

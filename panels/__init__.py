@@ -1,0 +1,20 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Panels of the Relight extension: the sidebar "Relight" tab of the 3D viewport."""
+
+import bpy
+
+from . import main
+
+_modules = (main,)
+
+classes = tuple(cls for module in _modules for cls in module.classes)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,200 @@
+"""The extension as Blender sees it: manifest validation, the built zip, install and enable.
+
+Uses Blender's own extension CLI from the bpy wheel (tools/blender_ext.py finds it) and installs
+the zip into a throw-away user folder (BLENDER_USER_RESOURCES) in a fresh interpreter, so the
+developer's own Blender configuration is never touched.
+
+The zip is dist/relight-<version>-linux_x64.zip when `make extension` has built it (then the
+bundled wheels are checked too); otherwise a zip without wheels is built into a temp dir.
+"""
+
+from __future__ import annotations
+
+import ast
+import glob
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import tomllib
+import zipfile
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLENDER_EXT = [sys.executable, os.path.join(ROOT, "tools", "blender_ext.py")]
+ADDON_ID = "relight"
+MODULE = f"bl_ext.user_default.{ADDON_ID}"
+
+bpy = pytest.importorskip("bpy", reason="needs the bpy wheel (make test installs it)")
+if sys.platform != "linux":
+    pytest.skip("the install test uses the linux-x64 build", allow_module_level=True)
+
+# Inside a real Blender (tests/run_in_blender.py) sys.executable is Blender's Python, which has
+# no bpy module: run Blender's CLI script from Blender's own scripts folder and install the
+# add-on through the Blender binary. With the bpy wheel, a fresh Python of this venv does both.
+IN_BLENDER = bool(bpy.app.binary_path)
+CLI_ENV = dict(os.environ, BLENDER_SCRIPTS=bpy.utils.system_resource("SCRIPTS"))
+
+with open(os.path.join(ROOT, "blender_manifest.toml"), "rb") as _fh:
+    MANIFEST = tomllib.load(_fh)
+
+# Everything a build copy needs; the build's own exclusion patterns do the rest.
+_COPY_IGNORE = shutil.ignore_patterns(
+    ".git", ".venv*", "dist", "wheels", "out", ".cache", "__pycache__", ".pytest_cache", "*.zip",
+)
+
+
+def _run(cmd, **kwargs):
+    kwargs.setdefault("env", CLI_ENV)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kwargs)
+
+
+def _build_zip_without_wheels(tmp_dir: str) -> str:
+    """Build the extension from a copy of the tree whose manifest lists no wheels."""
+    src = os.path.join(tmp_dir, "src")
+    shutil.copytree(ROOT, src, ignore=_COPY_IGNORE)
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    try:
+        import sync_wheels
+    finally:
+        sys.path.pop(0)
+    sync_wheels.sync(os.path.join(src, "blender_manifest.toml"), [])
+    out = os.path.join(tmp_dir, f"{ADDON_ID}.zip")
+    proc = _run([*BLENDER_EXT, "build", "--source-dir", src, "--output-filepath", out])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def extension_zip(tmp_path_factory) -> str:
+    built = os.path.join(ROOT, "dist", f"{ADDON_ID}-{MANIFEST['version']}-linux_x64.zip")
+    if os.path.exists(built):
+        return built
+    return _build_zip_without_wheels(str(tmp_path_factory.mktemp("build")))
+
+
+def test_manifest_validates():
+    proc = _run([*BLENDER_EXT, "validate", ROOT])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Success" in proc.stdout
+
+
+def test_manifest_fields():
+    assert MANIFEST["id"] == ADDON_ID
+    assert MANIFEST["type"] == "add-on"
+    assert MANIFEST["blender_version_min"] >= "4.2.0"
+    for reason in MANIFEST.get("permissions", {}).values():
+        assert not reason.endswith("."), "Blender rejects permission reasons ending with a period"
+    # Never bundle numpy: Blender ships its own and two copies break at import.
+    assert not [w for w in MANIFEST.get("wheels", []) if os.path.basename(w).startswith("numpy-")]
+
+
+def test_zip_contents(extension_zip):
+    proc = _run([*BLENDER_EXT, "validate", extension_zip])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    with zipfile.ZipFile(extension_zip) as zf:
+        names = zf.namelist()
+    for required in ("blender_manifest.toml", "__init__.py", "operators/__init__.py",
+                     "panels/__init__.py", "relight_addon/__init__.py"):
+        assert required in names
+    excluded = ("tests/", "tools/", "benchmarks/", "requirements/", ".ci/", ".git", ".venv",
+                "dist/", "out/", "Makefile", "README.md")
+    leaked = [n for n in names if n.startswith(excluded) or "__pycache__" in n or n.endswith(".pyc")]
+    assert not leaked, leaked
+    wheels = [n for n in names if n.startswith("wheels/")]
+    assert not [w for w in wheels if "numpy" in os.path.basename(w).lower()]
+
+
+def _absolute_local_imports(path: str) -> list[str]:
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+    local = {"relight_addon", "operators", "panels"}
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module]
+        else:
+            continue
+        bad += [f"{os.path.relpath(path, ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in local]
+    return bad
+
+
+def test_extension_imports_are_relative():
+    """Blender imports the add-on as bl_ext.<repo>.relight: absolute local imports break there."""
+    files = [os.path.join(ROOT, "__init__.py")]
+    for sub in ("operators", "panels", "relight_addon/core", "relight_addon/blender"):
+        files += glob.glob(os.path.join(ROOT, sub, "**", "*.py"), recursive=True)
+    bad = [hit for f in files for hit in _absolute_local_imports(f)]
+    assert not bad, bad
+
+
+_INSTALL_SCRIPT = textwrap.dedent("""
+    import json, os, sys
+    import bpy
+
+    zip_path, module = sys.argv[sys.argv.index("--") + 1:][:2] if "--" in sys.argv else sys.argv[1:3]
+    result = {"repos": [r.module for r in bpy.context.preferences.extensions.repos]}
+    result["install"] = sorted(bpy.ops.extensions.package_install_files(
+        filepath=zip_path, repo="user_default", enable_on_install=True))
+    result["enabled"] = module in bpy.context.preferences.addons
+    result["module_file"] = getattr(sys.modules.get(module), "__file__", None)
+    result["has_operator"] = hasattr(bpy.ops.relight, "check_dependencies")
+    result["has_panel"] = hasattr(bpy.types, "RELIGHT_PT_main")
+    result["run"] = sorted(bpy.ops.relight.check_dependencies()) if result["has_operator"] else None
+    result["version"] = sys.modules[module + ".panels.main"].addon_version()
+    # Wheels are unpacked into <user>/extensions/.local/... while the add-on is enabled.
+    user = os.environ["BLENDER_USER_RESOURCES"]
+    result["site_packages"] = sorted(
+        entry for path in sys.path if path.startswith(user) and os.path.isdir(path)
+        for entry in os.listdir(path) if entry.endswith(".dist-info"))
+    bpy.ops.preferences.addon_disable(module=module)
+    result["after_disable"] = {
+        "enabled": module in bpy.context.preferences.addons,
+        "has_operator_class": hasattr(bpy.types, "RELIGHT_OT_check_dependencies"),
+        "has_panel": hasattr(bpy.types, "RELIGHT_PT_main"),
+    }
+    print("RESULT " + json.dumps(result))
+""")
+
+
+def test_install_enable_run(extension_zip, tmp_path):
+    user = tmp_path / "blender_user"
+    user.mkdir()
+    script = tmp_path / "install.py"
+    script.write_text(_INSTALL_SCRIPT)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    env.pop("PYTHONPATH", None)  # the add-on must work from the installed copy alone
+    if IN_BLENDER:
+        cmd = [bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1",
+               "--python", str(script), "--", extension_zip, MODULE]
+    else:
+        cmd = [sys.executable, str(script), extension_zip, MODULE]
+    proc = _run(cmd, env=env, cwd=str(tmp_path))
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == 0, output
+    line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")), None)
+    assert line is not None, output
+    result = json.loads(line[len("RESULT "):])
+
+    assert "user_default" in result["repos"], result
+    assert result["install"] == ["FINISHED"], output
+    assert result["enabled"], output
+    assert result["module_file"].startswith(str(user)), result["module_file"]
+    assert result["has_operator"] and result["has_panel"], result
+    assert result["run"] == ["FINISHED"], output
+    assert "Relight: available:" in output and "ray casting:" in output, output
+    assert result["version"] == MANIFEST["version"]
+    assert result["after_disable"] == {"enabled": False, "has_operator_class": False, "has_panel": False}
+
+    # Bundled wheels (when the zip has them) are unpacked into the user site-packages,
+    # which Blender puts on sys.path.
+    with zipfile.ZipFile(extension_zip) as zf:
+        wheels = [os.path.basename(n) for n in zf.namelist() if n.startswith("wheels/") and n.endswith(".whl")]
+    installed = {d.split("-")[0].lower() for d in result["site_packages"]}
+    expected = {w.split("-")[0].lower() for w in wheels}
+    assert expected <= installed, sorted(expected - installed)
