@@ -1,0 +1,207 @@
+"""SceneData: the one boundary type between Blender (or a test generator) and the maths.
+
+Every patch is a planar bilinear patch with four corners ``(a, b, c, d)`` in counter-clockwise
+order seen from the front (normal side).  A triangle repeats its last corner: ``(a, b, c, c)``.
+The bilinear map ``P(u, v) = (1-u)(1-v) a + u(1-v) b + u v c + (1-u) v d`` is then a valid
+(Duffy) parametrisation of the triangle, so quads and triangles share one code path in the
+hierarchy: a 4-way split at ``u, v = 1/2`` gives planar sub-patches whose areas add up exactly.
+
+Units: emission is exitance (W/m^2, radiosity units).  Reflectance is linear RGB in [0, 1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Relative tolerance (to the patch size) above which a quad counts as non-planar and is split.
+PLANARITY_TOLERANCE = 1e-4
+# Faces with an area below this fraction of the mean face area are dropped as degenerate.
+DEGENERATE_AREA_FRACTION = 1e-10
+
+
+class SceneError(ValueError):
+    """Input the solver cannot work with; the message is meant for the user."""
+
+
+def bilinear_point(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Points of bilinear patches.  corners (..., 4, 3), u and v broadcast to (...,)."""
+    u = np.asarray(u)[..., None]
+    v = np.asarray(v)[..., None]
+    a, b, c, d = (corners[..., i, :] for i in range(4))
+    return (1 - u) * (1 - v) * a + u * (1 - v) * b + u * v * c + (1 - u) * v * d
+
+
+def quad_area_normal(corners: np.ndarray):
+    """Area and unit normal of planar bilinear patches (triangles repeat a corner).
+
+    Uses the diagonals: for a planar quad, area = |(c - a) x (d - b)| / 2, exact for triangles
+    ``(a, b, c, c)`` too.
+    """
+    cross = np.cross(corners[..., 2, :] - corners[..., 0, :], corners[..., 3, :] - corners[..., 1, :])
+    twice = np.linalg.norm(cross, axis=-1)
+    normal = cross / np.maximum(twice, 1e-300)[..., None]
+    return 0.5 * twice, normal
+
+
+def _non_planarity(corners: np.ndarray) -> np.ndarray:
+    """Distance of corner d from the plane of (a, b, c), relative to the patch diameter."""
+    a, b, c, d = (corners[:, i, :] for i in range(4))
+    n = np.cross(b - a, c - a)
+    nn = np.linalg.norm(n, axis=-1)
+    size = np.maximum(np.linalg.norm(c - a, axis=-1), np.linalg.norm(d - b, axis=-1))
+    dist = np.abs(np.einsum("ij,ij->i", d - a, n)) / np.maximum(nn, 1e-300)
+    return dist / np.maximum(size, 1e-300)
+
+
+@dataclass
+class SceneData:
+    """Patches (structure of arrays) plus optional texture data and a viewpoint.
+
+    corners   (p, 4, 3) float64  planar bilinear patches, triangles as (a, b, c, c)
+    rho       (p, 3)    float64  diffuse reflectance, linear RGB
+    emission  (p, 3)    float64  exitance; non-zero only on lamp patches
+    lamp      (p,)      int32    index into ``lamp_names`` for emitters, -1 otherwise
+    occluder  (p,)      bool     whether the patch blocks rays (Blender area lights do not)
+    group     (p,)      int32    caller's grouping (object/material), carried through untouched
+    uv        (p, 4, 2) optional texture coordinates of the corners
+    image     (p,)      optional index into ``images`` (-1: none)
+    """
+
+    corners: np.ndarray
+    rho: np.ndarray
+    emission: np.ndarray
+    lamp: np.ndarray
+    lamp_names: list = field(default_factory=list)
+    occluder: np.ndarray | None = None
+    group: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    image: np.ndarray | None = None
+    images: list = field(default_factory=list)
+    viewpoint: np.ndarray | None = None
+    dropped_degenerate: int = 0
+    dropped_duplicate: int = 0
+
+    def __post_init__(self):
+        p = len(self.corners)
+        self.corners = np.asarray(self.corners, dtype=np.float64).reshape(p, 4, 3)
+        self.rho = np.broadcast_to(np.asarray(self.rho, dtype=np.float64), (p, 3)).copy()
+        self.emission = np.broadcast_to(np.asarray(self.emission, dtype=np.float64), (p, 3)).copy()
+        self.lamp = np.broadcast_to(np.asarray(self.lamp, dtype=np.int32), (p,)).copy()
+        self.occluder = (np.ones(p, bool) if self.occluder is None
+                         else np.broadcast_to(np.asarray(self.occluder, bool), (p,)).copy())
+        self.group = (np.zeros(p, np.int32) if self.group is None
+                      else np.broadcast_to(np.asarray(self.group, np.int32), (p,)).copy())
+        if not np.all(np.isfinite(self.corners)):
+            raise SceneError("Some vertices have non-finite coordinates")
+        if np.any(self.rho < 0) or np.any(self.rho >= 1):
+            raise SceneError("Reflectance must lie in [0, 1): a value of 1 or more never converges")
+        if np.any(self.emission < 0) or not np.all(np.isfinite(self.emission)):
+            raise SceneError("Emission must be finite and non-negative")
+        if self.lamp.size and self.lamp.max(initial=-1) >= len(self.lamp_names):
+            self.lamp_names = list(self.lamp_names) + [
+                f"lamp {i}" for i in range(len(self.lamp_names), int(self.lamp.max()) + 1)]
+        emitting = self.emission.max(axis=1) > 0
+        if np.any(emitting & (self.lamp < 0)):
+            raise SceneError("Every emitting patch needs a lamp index")
+        self._split_non_planar()
+        self._drop_degenerate()
+        self._drop_duplicates()
+
+    # -- construction helpers -------------------------------------------------------------
+    def _per_patch_arrays(self):
+        names = ["corners", "rho", "emission", "lamp", "occluder", "group"]
+        if self.uv is not None:
+            names.append("uv")
+        if self.image is not None:
+            names.append("image")
+        return names
+
+    def _take(self, index):
+        for name in self._per_patch_arrays():
+            setattr(self, name, np.asarray(getattr(self, name))[index])
+
+    def _split_non_planar(self):
+        bad = _non_planarity(self.corners) > PLANARITY_TOLERANCE
+        if not bad.any():
+            return
+        # Split each non-planar quad (a, b, c, d) into (a, b, c, c) and (a, c, d, d).
+        keep = np.flatnonzero(~bad)
+        split = np.flatnonzero(bad)
+        order = np.concatenate([keep, split, split])
+        self._take(order)
+        n_keep, n_split = len(keep), len(split)
+        first = slice(n_keep, n_keep + n_split)
+        second = slice(n_keep + n_split, None)
+        c = self.corners
+        c[first, 3] = c[first, 2]
+        c[second, 1], c[second, 2], c[second, 3] = c[second, 2].copy(), c[second, 3].copy(), c[second, 3].copy()
+        if self.uv is not None:
+            t = self.uv
+            t[first, 3] = t[first, 2]
+            t[second, 1], t[second, 2], t[second, 3] = t[second, 2].copy(), t[second, 3].copy(), t[second, 3].copy()
+
+    def _drop_degenerate(self):
+        area, _ = quad_area_normal(self.corners)
+        if len(area) == 0:
+            return
+        floor = DEGENERATE_AREA_FRACTION * max(float(area.mean()), 1e-300)
+        bad = ~(area > floor)
+        self.dropped_degenerate += int(bad.sum())
+        if bad.any():
+            self._take(np.flatnonzero(~bad))
+
+    def _drop_duplicates(self):
+        """Faces with the same corners (in any order) and the same facing count once: a second
+        copy would z-fight in the photo and double the light it reflects."""
+        if self.n_patches < 2:
+            return
+        _, normal = quad_area_normal(self.corners)
+        size = float(np.ptp(self.corners.reshape(-1, 3), axis=0).max()) or 1.0
+        key = np.round(np.sort(self.corners.reshape(-1, 4, 3), axis=1) / (1e-9 * size)).reshape(-1, 12)
+        key = np.concatenate([key, np.round(normal * 1e6)], axis=1)
+        _, first = np.unique(key, axis=0, return_index=True)
+        if len(first) < self.n_patches:
+            self.dropped_duplicate += self.n_patches - len(first)
+            self._take(np.sort(first))
+
+    # -- derived quantities ---------------------------------------------------------------
+    @property
+    def n_patches(self) -> int:
+        return len(self.corners)
+
+    @property
+    def n_lamps(self) -> int:
+        return len(self.lamp_names)
+
+    def area_normal(self):
+        return quad_area_normal(self.corners)
+
+    def occluder_triangles(self) -> np.ndarray:
+        """(t, 3, 3) triangles of every occluding patch (degenerate halves are dropped)."""
+        c = self.corners[self.occluder]
+        tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]])
+        e = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=-1)
+        return tris[e > 0]
+
+    def validate_for_solve(self):
+        """Raise SceneError for scenes the solver cannot light."""
+        if self.n_patches == 0:
+            raise SceneError("The scene has no usable faces")
+        if not np.any(self.emission > 0):
+            raise SceneError("The scene has no lamps: add an area light or an emissive face")
+
+
+def quads_from_boxes(center, size) -> np.ndarray:
+    """The six outward-facing faces (6, 4, 3) of an axis-aligned box."""
+    cx, cy, cz = np.asarray(center, float)
+    hx, hy, hz = np.asarray(size, float) / 2
+    x0, x1, y0, y1, z0, z1 = cx - hx, cx + hx, cy - hy, cy + hy, cz - hz, cz + hz
+    return np.array([
+        [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],  # bottom (-z)
+        [[x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]],  # top (+z)
+        [[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]],  # front (-y)
+        [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],  # back (+y)
+        [[x0, y0, z0], [x0, y0, z1], [x0, y1, z1], [x0, y1, z0]],  # left (-x)
+        [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],  # right (+x)
+    ])
