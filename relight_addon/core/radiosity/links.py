@@ -1,0 +1,256 @@
+"""Links between elements: initial linking, the BF/BFV refinement oracle, final form factors.
+
+A link (r, s) carries light from source element s to receiver element r.  ``F`` is the
+unoccluded form factor F_rs (receiver-area average), ``V`` the visibility attenuation in [0, 1]
+so that the transport factor is F * V, and ``vis`` the type VISIBLE / PARTIAL / INVISIBLE.
+
+Final form factors use a nested quadrature: a link's receiver is integrated over the Gauss
+points of all its leaf descendants.  In a closed scene the exact point-to-polygon values at each
+point sum to one over any partition of the sources, so energy is conserved exactly whatever the
+link levels (the furnace test depends on it).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.formfactor import point_to_polygon
+from ..geometry.sampling import area_uniform_uv, quadrature, stratified_unit_square
+from ..scene import bilinear_point
+from .hierarchy import Hierarchy
+
+VISIBLE, PARTIAL, INVISIBLE = 0, 1, 2
+
+# Oracle sample points on the receiver (parameter space): centre and corners, where F peaks.
+_ORACLE_UV = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+# Points closer than this fraction of the scene size to a plane count as on it.
+_PLANE_TOL = 1e-9
+# Chunk size (sample points) for the vectorised final form factors: bounds peak memory.
+_CHUNK_POINTS = 400_000
+
+
+@dataclass
+class LinkSet:
+    receiver: np.ndarray
+    source: np.ndarray
+    F: np.ndarray        # unoccluded form factor
+    V: np.ndarray        # visibility attenuation
+    vis: np.ndarray      # VISIBLE / PARTIAL / INVISIBLE
+    spread: np.ndarray | None = None   # oracle only: variation of F over the receiver
+
+    @property
+    def n(self):
+        return len(self.receiver)
+
+    @staticmethod
+    def empty():
+        z = np.zeros(0)
+        return LinkSet(np.zeros(0, np.int64), np.zeros(0, np.int64), z, z.copy(), np.zeros(0, np.int8),
+                       z.copy())
+
+    _FIELDS = ("receiver", "source", "F", "V", "vis", "spread")
+
+    def take(self, mask):
+        return LinkSet(*(None if getattr(self, f) is None else getattr(self, f)[mask]
+                         for f in self._FIELDS))
+
+    @staticmethod
+    def concat(parts):
+        parts = [p for p in parts if p.n]
+        if not parts:
+            return LinkSet.empty()
+        return LinkSet(*(None if any(getattr(p, f) is None for p in parts)
+                         else np.concatenate([getattr(p, f) for p in parts])
+                         for f in LinkSet._FIELDS))
+
+
+def facing(h: Hierarchy, r: np.ndarray, s: np.ndarray, scale: float) -> np.ndarray:
+    """Conservative test that s has some part in front of r and r some part in front of s."""
+    tol = _PLANE_TOL * scale
+    s_front = np.einsum("nkj,nj->nk", h.corners[s] - h.centroid[r][:, None], h.normal[r]).max(axis=1)
+    r_front = np.einsum("nkj,nj->nk", h.corners[r] - h.centroid[s][:, None], h.normal[s]).max(axis=1)
+    return (s_front > tol) & (r_front > tol) & (h.patch[r] != h.patch[s])
+
+
+def initial_pairs(h: Hierarchy, receives: np.ndarray, sends: np.ndarray, scale: float,
+                  block: int = 2048):
+    """All facing (receiver patch, source patch) pairs, generated in blocks to bound memory."""
+    recv = np.flatnonzero(receives)
+    send = np.flatnonzero(sends)
+    rs, ss = [], []
+    for start in range(0, len(recv), max(1, block * block // max(len(send), 1))):
+        rb = recv[start:start + max(1, block * block // max(len(send), 1))]
+        r = np.repeat(rb, len(send))
+        s = np.tile(send, len(rb))
+        ok = facing(h, r, s, scale)
+        rs.append(r[ok])
+        ss.append(s[ok])
+    if not rs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(rs), np.concatenate(ss)
+
+
+def _offset_segments(h, r, s, p, q, scale):
+    """Lift ray end points off their surfaces so that they do not hit their own element."""
+    eps = 1e-7 * scale
+    return p + eps * h.normal[r], q + eps * h.normal[s]
+
+
+def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float):
+    """Cheap per-link estimates used by the refinement oracle.
+
+    Returns (F_est, F_spread, visible_fraction, partial): the mean and the max - min of the
+    exact point-to-polygon form factor at five receiver points, and visibility from ``rays``
+    jittered segments between random points of the two elements.
+    """
+    n = len(r)
+    if n == 0:
+        z = np.zeros(0)
+        return z, z.copy(), z.copy(), np.zeros(0, bool)
+    k = len(_ORACLE_UV)
+    pts = bilinear_point(h.corners[r][:, None], _ORACLE_UV[None, :, 0], _ORACLE_UV[None, :, 1])
+    F = point_to_polygon(pts.reshape(-1, 3), np.repeat(h.normal[r], k, axis=0),
+                         np.repeat(h.corners[s], k, axis=0), np.repeat(h.normal[s], k, axis=0))
+    F = F.reshape(n, k)
+    spread = F.max(axis=1) - F.min(axis=1)
+    F = F.mean(axis=1)
+    if occluder is None or rays <= 0:
+        return F, spread, np.ones(n), np.zeros(n, bool)
+    ur, vr = stratified_unit_square(n, rays, rng)
+    us, vs = stratified_unit_square(n, rays, rng)
+    ur, vr = area_uniform_uv(h.corners[r], ur, vr)
+    us, vs = area_uniform_uv(h.corners[s], us, vs)
+    p = bilinear_point(h.corners[r][:, None], ur, vr)
+    q = bilinear_point(h.corners[s][:, None], us, vs)
+    rr = np.repeat(r, rays)
+    ss = np.repeat(s, rays)
+    p, q = p.reshape(-1, 3), q.reshape(-1, 3)
+    counts = _mutually_in_front(h, rr, ss, p, q).reshape(n, rays)
+    p, q = _offset_segments(h, rr, ss, p, q, scale)
+    blocked = occluder.segments_occluded(p, q).reshape(n, rays) & counts
+    tried = counts.sum(axis=1)
+    n_blocked = blocked.sum(axis=1)
+    free = np.where(tried > 0, 1.0 - n_blocked / np.maximum(tried, 1), 1.0)
+    partial = (n_blocked > 0) & (n_blocked < tried)
+    return F, spread, free, partial
+
+
+def _mutually_in_front(h, r, s, p, q):
+    """Whether the sample pair (p on r, q on s) can exchange light at all.
+
+    F already clips each source to the part in front of the receiver point; a visibility ray to
+    a source point behind that plane would only measure the clipping again (and hit the
+    receiver's own object), so such samples are left out of the visible fraction."""
+    return (np.einsum("ij,ij->i", q - p, h.normal[r]) > 0) & (np.einsum("ij,ij->i", p - q, h.normal[s]) > 0)
+
+
+def _segment_ranges(starts, counts):
+    """Concatenation of ranges [start, start + count) (vectorised)."""
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64)
+    offsets = np.cumsum(counts) - counts
+    return np.repeat(starts - offsets, counts) + np.arange(total)
+
+
+@dataclass
+class LeafGather:
+    """Leaf-level transport of a link set: for every (link, leaf under its receiver) pair, the
+    leaf's own form factor to the link's source (unoccluded, and with visibility)."""
+    leaf: np.ndarray       # leaf element id
+    source: np.ndarray     # source element id
+    F: np.ndarray          # unoccluded, integrated over the leaf's own Gauss points
+    FV: np.ndarray         # with visibility
+
+
+def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
+                       with_leaves: bool = False):
+    """Accurate F (unoccluded) and V per link by nested quadrature over the receiver's leaves.
+
+    Each Gauss point of each leaf under the receiver gets the exact point-to-polygon form factor
+    to the source and max(1, ceil(rays / points)) visibility rays to area-uniform source points.
+    With ``with_leaves`` also returns the per-leaf values (a LeafGather): gathering with them,
+    instead of pushing the link's mean down, removes the receiver-side error of the hierarchy,
+    at no extra cost since they are the same sums.
+    """
+    n = len(r)
+    F = np.zeros(n)
+    Fv = np.zeros(n)
+    seen_free = np.zeros(n, bool)
+    seen_blocked = np.zeros(n, bool)
+    parts = []
+    if n == 0:
+        empty = LeafGather(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+        out = (F, np.ones(0), np.zeros(0, np.int8))
+        return out + (empty,) if with_leaves else out
+
+    leaves = h.leaves()
+    pos, anc = h.ancestor_pairs(leaves)
+    order = np.argsort(anc, kind="stable")
+    anc_sorted = anc[order]
+    leaf_of = leaves[pos[order]]                       # leaves grouped by ancestor id
+    first = np.searchsorted(anc_sorted, np.arange(h.n))
+    count = np.searchsorted(anc_sorted, np.arange(h.n), side="right") - first
+
+    q_pts, q_w = quadrature(h.corners[leaves], m)      # (L, m*m, 3), (L, m*m)
+    leaf_slot = np.full(h.n, -1, np.int64)
+    leaf_slot[leaves] = np.arange(len(leaves))
+    mm = m * m
+
+    pts_per_link = count[r] * mm
+    link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(pts_per_link) // _CHUNK_POINTS)) + 1)
+    for links in link_chunks:
+        if len(links) == 0:
+            continue
+        lr, ls = r[links], s[links]
+        nleaf = count[lr]
+        leaf_ids = leaf_of[_segment_ranges(first[lr], nleaf)]           # per (link, leaf) pair
+        link_of = np.repeat(np.arange(len(links)), nleaf)
+        n_pairs = len(leaf_ids)
+        slot = leaf_slot[leaf_ids]
+        P = q_pts[slot].reshape(-1, 3)                                    # per (pair, point)
+        W = q_w[slot].reshape(-1)
+        pair_pt = np.repeat(np.arange(n_pairs), mm)
+        link_pt = link_of[pair_pt]
+        src = ls[link_pt]
+        f = point_to_polygon(P, h.normal[lr][link_pt], h.corners[src], h.normal[src])
+        if occluder is None or rays <= 0:
+            free_frac = np.ones(len(P))
+        else:
+            per_pt = np.maximum(1, -(-rays // (nleaf * mm)))              # ceil, per link
+            ray_count = per_pt[link_pt]
+            ray_pt = np.repeat(np.arange(len(P)), ray_count)
+            ray_src = src[ray_pt]
+            xi_u, xi_v = rng.random((2, len(ray_pt), 1))
+            u, v = area_uniform_uv(h.corners[ray_src], xi_u, xi_v)
+            Q = bilinear_point(h.corners[ray_src], u[:, 0], v[:, 0])
+            recv_el = lr[link_pt][ray_pt]
+            counts = _mutually_in_front(h, recv_el, ray_src, P[ray_pt], Q)
+            p0, q0 = _offset_segments(h, recv_el, ray_src, P[ray_pt], Q, scale)
+            blocked = occluder.segments_occluded(p0, q0)
+            free = counts & ~blocked
+            blocked &= counts
+            tried = np.bincount(ray_pt, counts, len(P))
+            free_frac = np.where(tried > 0, np.bincount(ray_pt, free, len(P)) / np.maximum(tried, 1), 1.0)
+            link_ray = link_pt[ray_pt]
+            seen_free[links] |= np.bincount(link_ray, free, len(links)) > 0
+            seen_blocked[links] |= np.bincount(link_ray, blocked, len(links)) > 0
+        wsum = np.bincount(link_pt, W, len(links))
+        F[links] = np.bincount(link_pt, W * f, len(links)) / np.maximum(wsum, 1e-300)
+        Fv[links] = np.bincount(link_pt, W * f * free_frac, len(links)) / np.maximum(wsum, 1e-300)
+        if with_leaves:
+            pw = np.maximum(np.bincount(pair_pt, W, n_pairs), 1e-300)
+            parts.append(LeafGather(leaf_ids, ls[link_of], np.bincount(pair_pt, W * f, n_pairs) / pw,
+                                    np.bincount(pair_pt, W * f * free_frac, n_pairs) / pw))
+
+    if occluder is None or rays <= 0:
+        seen_free[:] = True
+    V = np.where(F > 0, Fv / np.where(F > 0, F, 1.0), np.where(seen_blocked & ~seen_free, 0.0, 1.0))
+    V = np.clip(V, 0.0, 1.0)
+    vis = np.where(seen_blocked, np.where(seen_free, PARTIAL, INVISIBLE), VISIBLE).astype(np.int8)
+    if not with_leaves:
+        return F, V, vis
+    gather = LeafGather(*(np.concatenate([getattr(p, k) for p in parts])
+                          for k in ("leaf", "source", "F", "FV")))
+    return F, V, vis, gather

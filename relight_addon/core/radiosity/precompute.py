@@ -1,0 +1,223 @@
+"""Hierarchical radiosity on a SceneData: refine, solve, and per-lamp basis solutions.
+
+The solution is kept as one basis B_k per lamp on the leaves, with fixed links, so that
+B = sum_k I_k B_k for any lamp intensities I_k (light transport is linear in the exitances).
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..scene import SceneData
+from .hierarchy import Hierarchy
+from .links import LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates
+from .presets import Quality, get_preset
+from .solver import LeafSystem, SolveInfo
+
+MAX_REFINE_ROUNDS = 40
+
+
+class Cancelled(Exception):
+    """Raised when the progress callback asks to stop."""
+
+
+@dataclass
+class RadiositySolution:
+    scene: SceneData
+    quality: Quality
+    hierarchy: Hierarchy
+    links: LinkSet
+    system: LeafSystem
+    gather: object                    # LeafGather: per-leaf F and F*V of every link
+    basis: np.ndarray                 # (k, L, 3) per-lamp leaf radiosity
+    info: SolveInfo
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def leaves(self):
+        return self.system.leaves
+
+    @property
+    def n_elements(self):
+        return self.hierarchy.n
+
+    def radiosity(self, intensities=None) -> np.ndarray:
+        """Leaf radiosity (L, 3) for lamp intensity factors I_k (default: all 1)."""
+        I = np.ones(len(self.basis)) if intensities is None else np.asarray(intensities, float)
+        return np.tensordot(I, self.basis, axes=1)
+
+    def patch_radiosity(self, intensities=None) -> np.ndarray:
+        """Area-weighted mean radiosity (p, 3) of each input patch."""
+        B = self.radiosity(intensities)
+        p = self.scene.n_patches
+        a = self.system.leaf_area
+        patch = self.system.patch
+        out = np.stack([np.bincount(patch, a * B[:, c], p) for c in range(3)], axis=1)
+        return out / np.maximum(np.bincount(patch, a, p), 1e-300)[:, None]
+
+    def stats(self) -> dict:
+        return {"patches": self.scene.n_patches, "elements": self.hierarchy.n,
+                "leaves": len(self.leaves), "links": self.links.n,
+                "iterations": self.info.iterations, "residual": self.info.residual,
+                **{f"t_{k}": v for k, v in self.timings.items()}}
+
+
+class _Timer(dict):
+    @contextmanager
+    def __call__(self, name):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self[name] = self.get(name, 0.0) + time.perf_counter() - t0
+
+
+def _lamp_emission(scene: SceneData, patch_of_leaf: np.ndarray) -> np.ndarray:
+    """(L, 3, k): each lamp's emission on the leaves."""
+    k = scene.n_lamps
+    E = np.zeros((len(patch_of_leaf), 3, k))
+    lamp = scene.lamp[patch_of_leaf]
+    hit = lamp >= 0
+    E[np.flatnonzero(hit), :, lamp[hit]] = scene.emission[patch_of_leaf[hit]]
+    return E
+
+
+def _oracle(h, links: LinkSet, b_est, b_var, b_scale, q: Quality, min_area):
+    """Which links to refine, and on which side.
+
+    Gathering a link as F_rs * B_s (constant over the receiver, mean over the source) errs by
+    about B_s * spread(F over the receiver) on the receiver side and F_rs * var(B over the
+    source) on the source side; the source polygon itself is integrated exactly.  A partially
+    visible link is refined while B_s F_rs exceeds the (smaller) BFV threshold.
+    """
+    r, s = links.receiver, links.source
+    ar, as_ = h.area[r], h.area[s]
+    bs = b_est[s]
+    err_recv = bs * links.spread * links.V
+    err_src = b_var[s] * links.F * links.V
+    shadow = (links.vis == 1) & (bs * links.F > q.eps_bfv * b_scale)
+    want_r = err_recv > q.eps_bf * b_scale
+    want_s = err_src > q.eps_bf * b_scale
+    can_r = ar / 4 >= min_area
+    can_s = as_ / 4 >= min_area
+    # Shadow boundaries: split the larger side; otherwise the side whose error dominates.
+    split_r = can_r & ((want_r & (err_recv >= err_src)) | (want_r & ~can_s) |
+                       (shadow & ((ar >= as_) | ~can_s)))
+    split_s = ~split_r & can_s & (want_s | shadow)
+    return split_r, split_s
+
+
+def _spread_over_leaves(h: Hierarchy, system: LeafSystem, b_leaf):
+    """max - min of the leaf values under every element."""
+    pos, anc = h.ancestor_pairs(system.leaves)
+    hi = np.full(h.n, -np.inf)
+    lo = np.full(h.n, np.inf)
+    np.maximum.at(hi, anc, b_leaf[pos])
+    np.minimum.at(lo, anc, b_leaf[pos])
+    return np.where(np.isfinite(hi), hi - lo, 0.0)
+
+
+def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=None, seed=0,
+                    progress=None) -> RadiositySolution:
+    """Refine links with the BF/BFV oracle, compute accurate F and V, solve one basis per lamp.
+
+    occluder: "auto" (Embree, else mathutils), None (no visibility: convex scenes, tests), or an
+    object with ``segments_occluded(origins, ends)``.  progress(fraction, message) may raise
+    Cancelled (or return False) to stop.
+    """
+    q = get_preset(quality)
+    scene.validate_for_solve()
+    rng = np.random.default_rng(seed)
+    timer = _Timer()
+
+    def report(frac, msg):
+        if progress is not None and progress(frac, msg) is False:
+            raise Cancelled(msg)
+
+    with timer("setup"):
+        lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
+        scale = float(np.linalg.norm(hi - lo)) or 1.0
+        if occluder == "auto":
+            from ..geometry.raycast import make_occluder
+            tris = scene.occluder_triangles()
+            occluder = make_occluder(tris) if len(tris) else None
+        h = Hierarchy(scene)
+        total_area = float(h.view("area").sum())
+        min_area = q.min_area * total_area
+        rho_max = scene.rho.max(axis=1)
+        e_max = scene.emission.max(axis=1)
+        receives = rho_max > 0
+        sends = (rho_max > 0) | (e_max > 0)
+        r0, s0 = initial_pairs(h, receives, sends, scale)
+
+    # Per element, for the oracle: radiosity estimate (brightest channel) and its variation
+    # over the element's leaves (the error of gathering from the element's mean radiosity).
+    b_est = np.zeros(h.n)
+    b_est[: scene.n_patches] = e_max
+    b_var = np.zeros(h.n)
+
+    kept = LinkSet.empty()
+    fresh_r, fresh_s = r0, s0
+    for pass_no in range(q.passes):
+        report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
+        b_scale = max(float(b_est.max(initial=0.0)), 1e-300)
+        changed = False
+        pending = kept
+        kept_parts = []
+        for _ in range(MAX_REFINE_ROUNDS):
+            if len(fresh_r):
+                with timer("oracle"):
+                    F, spread, free, partial = oracle_estimates(h, fresh_r, fresh_s, occluder,
+                                                                q.oracle_rays, rng, scale)
+                vis = np.where(partial, 1, np.where(free == 0, 2, 0)).astype(np.int8)
+                pending = LinkSet.concat([pending, LinkSet(fresh_r, fresh_s, F, free, vis, spread)])
+            if pending.n == 0:
+                break
+            with timer("refine"):
+                split_r, split_s = _oracle(h, pending, b_est, b_var, b_scale, q, q.min_area * total_area)
+                kept_parts.append(pending.take(~(split_r | split_s)))
+                if not (split_r.any() or split_s.any()):
+                    fresh_r = fresh_s = np.zeros(0, np.int64)
+                    break
+                changed = True
+                r, s = pending.receiver, pending.source
+                old_n = h.n
+                fc_r = h.split(r[split_r])
+                fc_s = h.split(s[split_s])
+                parent = h.parent[old_n:h.n]
+                b_est = np.concatenate([b_est, b_est[parent]])
+                b_var = np.concatenate([b_var, b_var[parent]])
+                four = np.arange(4)
+                nr = np.concatenate([(fc_r[:, None] + four).ravel(), np.repeat(r[split_s], 4)])
+                ns = np.concatenate([np.repeat(s[split_r], 4), (fc_s[:, None] + four).ravel()])
+                ok = facing(h, nr, ns, scale)
+                fresh_r, fresh_s = nr[ok], ns[ok]
+                pending = LinkSet.empty()
+        kept = LinkSet.concat(kept_parts)
+        if pass_no + 1 == q.passes or (pass_no > 0 and not changed):
+            break
+        # Intermediate solve on the oracle estimates, to estimate B for the next pass.
+        with timer("solve"):
+            system = LeafSystem.from_links(h, kept.receiver, kept.source, kept.F * kept.V, scene.rho)
+            B, _ = system.solve(scene.emission[system.patch], "gmres", tol=1e-4)
+            b_leaf = B.max(axis=1)
+            b_est = system.P_up @ b_leaf
+            b_var = _spread_over_leaves(h, system, b_leaf)
+
+    report(0.7, f"Form factors and visibility for {kept.n} links")
+    with timer("form_factors"):
+        F, V, vis, gather = final_form_factors(h, kept.receiver, kept.source, occluder,
+                                               q.quadrature, q.rays, rng, scale, with_leaves=True)
+    links = LinkSet(kept.receiver, kept.source, F, V, vis)
+
+    report(0.9, "Solving per-lamp radiosity")
+    with timer("solve"):
+        system = LeafSystem(h, gather.leaf, gather.source, gather.FV, scene.rho)
+        E = _lamp_emission(scene, system.patch)
+        basis, info = system.solve(E, solver or q.solver, tol=q.tol)
+    report(1.0, "Done")
+    return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
+                             dict(timer))

@@ -1,0 +1,47 @@
+"""Quality presets: each is one point on the speed/accuracy curve (benchmarks/bench_cornell.py).
+
+Thresholds are relative so that a preset means the same thing at any scene scale and lamp power:
+``eps_bf`` and ``eps_bfv`` are fractions of the brightest source radiosity, ``min_area`` is a
+fraction of the total surface area.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+
+@dataclass(frozen=True)
+class Quality:
+    name: str
+    eps_bf: float          # BF oracle: refine a link while B_s * F > eps_bf * B_max
+    eps_bfv: float         # BFV oracle: the same for partially visible links (shadow boundaries)
+    min_area: float        # smallest element, as a fraction of the total area
+    quadrature: int        # m x m Gauss points per leaf for the final form factors
+    rays: int              # visibility rays per final link (at least one per sample point)
+    oracle_rays: int       # visibility rays per candidate link during refinement
+    passes: int = 3        # refine / solve passes (the BF oracle needs a radiosity estimate)
+    solver: str = "gmres"
+    tol: float = 1e-8
+
+    def with_(self, **changes) -> "Quality":
+        return replace(self, **changes)
+
+
+PRESETS = {
+    "draft": Quality("draft", eps_bf=0.02, eps_bfv=0.01, min_area=2e-3, quadrature=1, rays=4,
+                     oracle_rays=4, passes=2),
+    "medium": Quality("medium", eps_bf=0.006, eps_bfv=0.003, min_area=3e-4, quadrature=2,
+                      rays=8, oracle_rays=4),
+    "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
+                    oracle_rays=8),
+    "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
+                     rays=32, oracle_rays=8),
+}
+
+
+def get_preset(preset) -> Quality:
+    if isinstance(preset, Quality):
+        return preset
+    try:
+        return PRESETS[preset]
+    except KeyError:
+        raise ValueError(f"Unknown quality preset {preset!r}; choose one of {sorted(PRESETS)}") from None

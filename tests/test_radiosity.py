@@ -1,0 +1,229 @@
+"""Hierarchical radiosity core against analytic truth (furnace, linearity, conservation)."""
+import numpy as np
+import pytest
+
+from relight_addon.core.geometry.formfactor import patch_to_patch
+from relight_addon.core.radiosity.links import final_form_factors
+from relight_addon.core.radiosity.precompute import Cancelled, solve_radiosity
+from relight_addon.core.radiosity.presets import PRESETS
+from relight_addon.core.scene import SceneData, SceneError, quads_from_boxes
+from relight_addon.core.testscenes import closed_cube, cornell_box, flip, parallel_squares
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 0.99])
+def test_furnace_every_leaf_matches_closed_form(rho):
+    scene = closed_cube(rho=rho, emission=2.0, n=2)
+    sol = solve_radiosity(scene, "medium")
+    B = sol.radiosity()
+    exact = 2.0 / (1.0 - rho)
+    assert np.all(np.isfinite(B))
+    rel = np.abs(B / exact - 1.0)
+    print(f"rho={rho}: leaves={len(B)} links={sol.links.n} iterations={sol.info.iterations} "
+          f"residual={sol.info.residual:.2e} max rel err={rel.max():.2e}")
+    assert rel.max() < 1e-3
+    assert sol.info.residual < 1e-6
+
+
+def _cube_with_box(rho=0.6):
+    """A closed room with a box inside: occlusion, touching faces (box on the floor)."""
+    room = flip(quads_from_boxes([0.5, 0.5, 0.5], [1, 1, 1]))
+    box = quads_from_boxes([0.5, 0.5, 0.15], [0.3, 0.3, 0.3])[1:]     # no bottom: on the floor
+    corners = np.concatenate([room, box])
+    emission = np.zeros((len(corners), 3))
+    emission[1] = 3.0                                                   # the ceiling glows
+    lamp = np.full(len(corners), -1)
+    lamp[1] = 0
+    return SceneData(corners, rho, emission, lamp, ["ceiling"])
+
+
+def _energy_ratio(scene, quality):
+    sol = solve_radiosity(scene, quality)
+    system = sol.system
+    H = system.gather(sol.radiosity())                 # irradiance on each leaf
+    area = system.leaf_area[:, None]
+    emitted = float((area * scene.emission[system.patch]).sum())
+    absorbed = float((area * (1.0 - system.rho) * H).sum())
+    return absorbed / emitted, sol
+
+
+def test_closed_room_energy_balance_converges():
+    """In a closed room all emitted power is absorbed; the hierarchy's error shrinks with quality."""
+    scene = _cube_with_box()
+    draft, _ = _energy_ratio(scene, "draft")
+    medium, sol = _energy_ratio(scene, "medium")
+    print(f"absorbed / emitted: draft {draft:.4f}, medium {medium:.4f}")
+    assert abs(medium - 1.0) < 0.03
+    assert abs(medium - 1.0) < abs(draft - 1.0)
+    # With visibility, lit leaves of a closed room see about the whole hemisphere.
+    system = sol.system
+    rows = system.gather(np.ones((system.n_leaves, 1)))[:, 0]
+    lit = rows > 0.5
+    assert np.average(rows[lit], weights=system.leaf_area[lit]) == pytest.approx(1.0, abs=0.02)
+
+
+def test_unoccluded_row_sums_are_exactly_one_in_a_closed_convex_room():
+    sol = solve_radiosity(closed_cube(rho=0.5, emission=1.0, n=2), "medium", occluder=None)
+    g = sol.gather
+    slot = np.searchsorted(sol.leaves, g.leaf)
+    rows = np.bincount(slot, g.F, len(sol.leaves))
+    assert np.abs(rows - 1.0).max() < 1e-9
+
+
+def test_link_form_factors_are_reciprocal():
+    sol = solve_radiosity(_cube_with_box(), "medium")
+    h, links = sol.hierarchy, sol.links
+    rng = np.random.default_rng(3)
+    pick = rng.choice(links.n, size=min(300, links.n), replace=False)
+    r, s = links.receiver[pick], links.source[pick]
+    F_sr, _, _ = final_form_factors(h, s, r, None, 3, 0, rng, 1.0)
+    F_rs, _, _ = final_form_factors(h, r, s, None, 3, 0, rng, 1.0)
+    lhs, rhs = h.area[r] * F_rs, h.area[s] * F_sr
+    significant = lhs > 1e-4 * lhs.max()
+    rel = np.abs(lhs - rhs)[significant] / lhs[significant]
+    assert np.median(rel) < 1e-3
+    assert np.percentile(rel, 95) < 0.02
+
+
+@pytest.mark.parametrize("method", ["jacobi", "gauss_seidel", "bicgstab", "shooting"])
+def test_solvers_agree_with_gmres(method):
+    scene = cornell_box()
+    sol = solve_radiosity(scene, "draft")
+    E = scene.emission[sol.system.patch]
+    ref, info_ref = sol.system.solve(E, "gmres", tol=1e-12)
+    B, info = sol.system.solve(E, method, tol=1e-10)
+    print(f"{method}: {info.iterations} iterations, residual {info.residual:.2e} "
+          f"(gmres {info_ref.iterations}, {info_ref.residual:.2e})")
+    assert info.converged
+    assert np.abs(B - ref).max() <= 1e-6 * np.abs(ref).max()
+    assert info.residual < 1e-6
+
+
+def test_jacobi_stalls_as_rho_approaches_one_but_krylov_does_not():
+    its = {}
+    for rho in (0.5, 0.95):
+        scene = _cube_with_box(rho)
+        sol = solve_radiosity(scene, "draft")
+        E = scene.emission[sol.system.patch]
+        _, jac = sol.system.solve(E, "jacobi", tol=1e-8)
+        _, kry = sol.system.solve(E, "gmres", tol=1e-8)
+        its[rho] = (jac.iterations, kry.iterations)
+    # Jacobi error falls like rho^n: about log(tol)/log(rho) sweeps.
+    assert its[0.95][0] > 5 * its[0.5][0]
+    assert its[0.95][1] < its[0.95][0] / 5
+
+
+def test_per_lamp_basis_equals_full_resolve():
+    scene = cornell_box()
+    # Three lamps: the ceiling lamp, the back wall and the short box top glow too.
+    emission, lamp = scene.emission.copy(), scene.lamp.copy()
+    names = list(scene.lamp_names) + ["back wall", "box top"]
+    for k, patch in ((1, 2), (2, 6)):
+        emission[patch] = (3.0, 2.0, 1.0) if k == 1 else (0.5, 4.0, 0.5)
+        lamp[patch] = k
+    scene = SceneData(scene.corners, scene.rho, emission, lamp, names, occluder=scene.occluder)
+    sol = solve_radiosity(scene, PRESETS["medium"].with_(tol=1e-12))
+    intensities = np.array([0.3, 2.5, 0.0])
+    mixed = sol.radiosity(intensities)
+    scale = np.where(scene.lamp >= 0, intensities[np.maximum(scene.lamp, 0)], 1.0)
+    full, info = sol.system.solve(scene.emission[sol.system.patch] * scale[sol.system.patch, None],
+                                  "gmres", tol=1e-12)
+    assert np.abs(mixed - full).max() <= 1e-6 * np.abs(full).max()
+    assert np.allclose(sol.radiosity(), sol.basis.sum(axis=0))
+
+
+def test_unoccluded_parallel_squares_direct_irradiance():
+    """Direct light on the receiver: rho * E * F with the analytic F (no interreflection)."""
+    scene = parallel_squares(receiver_rho=0.5)
+    sol = solve_radiosity(scene, "high")
+    B = sol.patch_radiosity()
+    assert B[1, 0] == pytest.approx(0.5 * 0.199825, rel=2e-3)
+    assert B[0, 0] == pytest.approx(1.0)
+
+
+# -- degenerate input --------------------------------------------------------------------------
+def test_scene_without_lamp_is_a_clear_error():
+    scene = closed_cube(rho=0.5, emission=0.0)
+    with pytest.raises(SceneError, match="no lamps"):
+        solve_radiosity(scene, "draft")
+
+
+def test_zero_area_and_duplicate_faces_are_handled():
+    base = _cube_with_box()
+    corners = np.concatenate([base.corners, base.corners[2:3],            # duplicate face
+                              np.zeros((1, 4, 3)),                          # zero-area face
+                              base.corners[3:4].copy()])
+    corners[-1, 1] = corners[-1, 0]                                         # collapsed to a line
+    corners[-1, 2] = corners[-1, 0]
+    n = len(corners)
+    emission = np.zeros((n, 3))
+    emission[: base.n_patches] = base.emission
+    lamp = np.full(n, -1)
+    lamp[: base.n_patches] = base.lamp
+    scene = SceneData(corners, 0.6, emission, lamp, ["ceiling"])
+    assert scene.dropped_degenerate == 2
+    assert scene.dropped_duplicate == 1
+    assert scene.n_patches == base.n_patches
+    B = solve_radiosity(scene, "draft", seed=5).patch_radiosity()
+    ref = solve_radiosity(base, "draft", seed=5).patch_radiosity()
+    assert np.all(np.isfinite(B))
+    assert np.allclose(B, ref)
+
+
+def test_lamp_facing_away_lights_nothing():
+    scene = parallel_squares()
+    flipped = scene.corners.copy()
+    flipped[0] = flipped[0, ::-1]                     # the emitter now faces up, away
+    scene = SceneData(flipped, scene.rho, scene.emission, scene.lamp, scene.lamp_names)
+    sol = solve_radiosity(scene, "high")
+    B = sol.patch_radiosity()
+    assert np.all(np.isfinite(B))
+    assert B[1].max() == 0.0
+    assert B[0, 0] == pytest.approx(1.0)
+
+
+def test_reflectance_zero_and_very_bright_lamps_stay_finite():
+    scene = cornell_box(lamp_exitance=(1e12, 1e12, 1e12))
+    sol = solve_radiosity(scene, "draft")
+    B = sol.radiosity()
+    assert np.all(np.isfinite(B)) and B.max() > 0
+    dark = solve_radiosity(closed_cube(rho=0.0, emission=1.0), "high")
+    assert np.allclose(dark.radiosity(), 1.0)
+    off = sol.radiosity(np.zeros(1))
+    assert np.all(off == 0.0)
+
+
+def test_tiny_and_huge_scenes_give_the_same_relative_answer():
+    ref = solve_radiosity(_cube_with_box(), "draft", seed=1).patch_radiosity()
+    for scale in (1e-4, 1e4):
+        base = _cube_with_box()
+        scaled = SceneData(base.corners * scale, base.rho, base.emission, base.lamp, base.lamp_names)
+        B = solve_radiosity(scaled, "draft", seed=1).patch_radiosity()
+        assert np.all(np.isfinite(B))
+        assert np.abs(B - ref).max() < 0.02 * ref.max()
+
+
+def test_reflectance_at_or_above_one_is_rejected():
+    with pytest.raises(SceneError, match="Reflectance"):
+        closed_cube(rho=1.0)
+
+
+def test_progress_callback_can_cancel():
+    seen = []
+
+    def progress(fraction, message):
+        seen.append((fraction, message))
+        if len(seen) >= 2:
+            raise Cancelled("user pressed Esc")
+
+    with pytest.raises(Cancelled):
+        solve_radiosity(cornell_box(), "draft", progress=progress)
+    assert seen[0][0] <= seen[1][0]
+
+
+def test_single_patch_form_factor_helper_matches_solver_quadrature():
+    """The solver's nested quadrature and patch_to_patch agree on an unrefined link."""
+    scene = parallel_squares()
+    sol = solve_radiosity(scene, "draft", occluder=None)
+    F = patch_to_patch(scene.corners[1:2], scene.corners[0:1], m=8)[0]
+    B = sol.patch_radiosity()
+    assert B[1, 0] == pytest.approx(0.5 * F, rel=0.02)
