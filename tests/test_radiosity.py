@@ -47,13 +47,13 @@ def _energy_ratio(scene, quality):
 
 
 def test_closed_room_energy_balance_converges():
-    """In a closed room all emitted power is absorbed; the hierarchy's error shrinks with quality."""
+    """In a closed room all emitted power is absorbed (up to the hierarchy's error)."""
     scene = _cube_with_box()
     draft, _ = _energy_ratio(scene, "draft")
     medium, sol = _energy_ratio(scene, "medium")
     print(f"absorbed / emitted: draft {draft:.4f}, medium {medium:.4f}")
-    assert abs(medium - 1.0) < 0.03
-    assert abs(medium - 1.0) < abs(draft - 1.0)
+    assert abs(draft - 1.0) < 0.03
+    assert abs(medium - 1.0) < 0.015
     # With visibility, lit leaves of a closed room see about the whole hemisphere.
     system = sol.system
     rows = system.gather(np.ones((system.n_leaves, 1)))[:, 0]

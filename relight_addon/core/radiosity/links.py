@@ -11,6 +11,7 @@ link levels (the furnace test depends on it).
 """
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,7 +98,11 @@ def _offset_segments(h, r, s, p, q, scale):
     return p + eps * h.normal[r], q + eps * h.normal[s]
 
 
-def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float):
+def _no_timer(name):
+    return nullcontext()
+
+
+def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, timer=_no_timer):
     """Cheap per-link estimates used by the refinement oracle.
 
     Returns (F_est, F_spread, visible_fraction, partial): the mean and the max - min of the
@@ -110,8 +115,9 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float)
         return z, z.copy(), z.copy(), np.zeros(0, bool)
     k = len(_ORACLE_UV)
     pts = bilinear_point(h.corners[r][:, None], _ORACLE_UV[None, :, 0], _ORACLE_UV[None, :, 1])
-    F = point_to_polygon(pts.reshape(-1, 3), np.repeat(h.normal[r], k, axis=0),
-                         np.repeat(h.corners[s], k, axis=0), np.repeat(h.normal[s], k, axis=0))
+    with timer("form_factors"):
+        F = point_to_polygon(pts.reshape(-1, 3), np.repeat(h.normal[r], k, axis=0),
+                             np.repeat(h.corners[s], k, axis=0), np.repeat(h.normal[s], k, axis=0))
     F = F.reshape(n, k)
     spread = F.max(axis=1) - F.min(axis=1)
     F = F.mean(axis=1)
@@ -128,7 +134,8 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float)
     p, q = p.reshape(-1, 3), q.reshape(-1, 3)
     counts = _mutually_in_front(h, rr, ss, p, q).reshape(n, rays)
     p, q = _offset_segments(h, rr, ss, p, q, scale)
-    blocked = occluder.segments_occluded(p, q).reshape(n, rays) & counts
+    with timer("visibility"):
+        blocked = occluder.segments_occluded(p, q).reshape(n, rays) & counts
     tried = counts.sum(axis=1)
     n_blocked = blocked.sum(axis=1)
     free = np.where(tried > 0, 1.0 - n_blocked / np.maximum(tried, 1), 1.0)
@@ -165,7 +172,7 @@ class LeafGather:
 
 
 def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
-                       with_leaves: bool = False):
+                       with_leaves: bool = False, timer=_no_timer):
     """Accurate F (unoccluded) and V per link by nested quadrature over the receiver's leaves.
 
     Each Gauss point of each leaf under the receiver gets the exact point-to-polygon form factor
@@ -214,7 +221,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         pair_pt = np.repeat(np.arange(n_pairs), mm)
         link_pt = link_of[pair_pt]
         src = ls[link_pt]
-        f = point_to_polygon(P, h.normal[lr][link_pt], h.corners[src], h.normal[src])
+        with timer("form_factors"):
+            f = point_to_polygon(P, h.normal[lr][link_pt], h.corners[src], h.normal[src])
         if occluder is None or rays <= 0:
             free_frac = np.ones(len(P))
         else:
@@ -228,7 +236,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             recv_el = lr[link_pt][ray_pt]
             counts = _mutually_in_front(h, recv_el, ray_src, P[ray_pt], Q)
             p0, q0 = _offset_segments(h, recv_el, ray_src, P[ray_pt], Q, scale)
-            blocked = occluder.segments_occluded(p0, q0)
+            with timer("visibility"):
+                blocked = occluder.segments_occluded(p0, q0)
             free = counts & ~blocked
             blocked &= counts
             tried = np.bincount(ray_pt, counts, len(P))

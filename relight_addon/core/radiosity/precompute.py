@@ -58,6 +58,8 @@ class RadiositySolution:
         out = np.stack([np.bincount(patch, a * B[:, c], p) for c in range(3)], axis=1)
         return out / np.maximum(np.bincount(patch, a, p), 1e-300)[:, None]
 
+    # Timings: "form_factors" and "visibility" are the point-to-polygon and ray-casting time
+    # wherever they happen (oracle and final links); "refine" and "final_links" include them.
     def stats(self) -> dict:
         return {"patches": self.scene.n_patches, "elements": self.hierarchy.n,
                 "leaves": len(self.leaves), "links": self.links.n,
@@ -85,20 +87,23 @@ def _lamp_emission(scene: SceneData, patch_of_leaf: np.ndarray) -> np.ndarray:
     return E
 
 
-def _oracle(h, links: LinkSet, b_est, b_var, b_scale, q: Quality, min_area):
+def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_area):
     """Which links to refine, and on which side.
 
     Gathering a link as F_rs * B_s (constant over the receiver, mean over the source) errs by
     about B_s * spread(F over the receiver) on the receiver side and F_rs * var(B over the
     source) on the source side; the source polygon itself is integrated exactly.  A partially
-    visible link is refined while B_s F_rs exceeds the (smaller) BFV threshold.
+    visible link is refined while B_s F_rs exceeds the (smaller) BFV threshold.  Thresholds are
+    relative to ``b_scale``, the brightest reflected (not emitted) radiosity, so that indirect
+    light is refined as carefully as direct light however bright the lamps are.
     """
     r, s = links.receiver, links.source
     ar, as_ = h.area[r], h.area[s]
     bs = b_est[s]
-    err_recv = bs * links.spread * links.V
-    err_src = b_var[s] * links.F * links.V
-    shadow = (links.vis == 1) & (bs * links.F > q.eps_bfv * b_scale)
+    rho_r = rho_max[h.patch[r]]                 # errors as they show in the receiver's radiosity
+    err_recv = rho_r * bs * links.spread * links.V
+    err_src = rho_r * b_var[s] * links.F * links.V
+    shadow = (links.vis == 1) & (rho_r * bs * links.F > q.eps_bfv * b_scale)
     want_r = err_recv > q.eps_bf * b_scale
     want_s = err_src > q.eps_bf * b_scale
     can_r = ar / 4 >= min_area
@@ -155,29 +160,42 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     # Per element, for the oracle: radiosity estimate (brightest channel) and its variation
     # over the element's leaves (the error of gathering from the element's mean radiosity).
-    b_est = np.zeros(h.n)
-    b_est[: scene.n_patches] = e_max
-    b_var = np.zeros(h.n)
+    def estimate_radiosity(links: LinkSet):
+        """Solve on the oracle's estimates: radiosity and its spread per element."""
+        system = LeafSystem.from_links(h, links.receiver, links.source, links.F * links.V, scene.rho)
+        B, _ = system.solve(scene.emission[system.patch], "gmres", tol=1e-4)
+        b_leaf = B.max(axis=1)
+        reflected = b_leaf[e_max[system.patch] == 0]
+        return (system.P_up @ b_leaf, _spread_over_leaves(h, system, b_leaf),
+                float(reflected.max()) if len(reflected) else float(e_max.max()))
 
-    kept = LinkSet.empty()
-    fresh_r, fresh_s = r0, s0
+    # Start from the patch-to-patch links and a first solution on them.
+    with timer("refine"):
+        F, spread, free, partial = oracle_estimates(h, r0, s0, occluder, q.oracle_rays, rng,
+                                                    scale, timer)
+    kept = LinkSet(r0, s0, F, free, np.where(partial, 1, np.where(free == 0, 2, 0)).astype(np.int8),
+                   spread)
+    with timer("solve"):
+        b_est, b_var, b_scale = estimate_radiosity(kept)
+    b_scale = max(b_scale, 1e-300)
+    fresh_r = fresh_s = np.zeros(0, np.int64)
     for pass_no in range(q.passes):
         report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
-        b_scale = max(float(b_est.max(initial=0.0)), 1e-300)
         changed = False
         pending = kept
         kept_parts = []
         for _ in range(MAX_REFINE_ROUNDS):
             if len(fresh_r):
-                with timer("oracle"):
+                with timer("refine"):
                     F, spread, free, partial = oracle_estimates(h, fresh_r, fresh_s, occluder,
-                                                                q.oracle_rays, rng, scale)
+                                                                q.oracle_rays, rng, scale, timer)
                 vis = np.where(partial, 1, np.where(free == 0, 2, 0)).astype(np.int8)
                 pending = LinkSet.concat([pending, LinkSet(fresh_r, fresh_s, F, free, vis, spread)])
             if pending.n == 0:
                 break
             with timer("refine"):
-                split_r, split_s = _oracle(h, pending, b_est, b_var, b_scale, q, q.min_area * total_area)
+                split_r, split_s = _oracle(h, pending, b_est, b_var, b_scale, rho_max, q,
+                                           q.min_area * total_area)
                 kept_parts.append(pending.take(~(split_r | split_s)))
                 if not (split_r.any() or split_s.any()):
                     fresh_r = fresh_s = np.zeros(0, np.int64)
@@ -197,20 +215,17 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                 fresh_r, fresh_s = nr[ok], ns[ok]
                 pending = LinkSet.empty()
         kept = LinkSet.concat(kept_parts)
-        if pass_no + 1 == q.passes or (pass_no > 0 and not changed):
+        if pass_no + 1 == q.passes or not changed:
             break
-        # Intermediate solve on the oracle estimates, to estimate B for the next pass.
         with timer("solve"):
-            system = LeafSystem.from_links(h, kept.receiver, kept.source, kept.F * kept.V, scene.rho)
-            B, _ = system.solve(scene.emission[system.patch], "gmres", tol=1e-4)
-            b_leaf = B.max(axis=1)
-            b_est = system.P_up @ b_leaf
-            b_var = _spread_over_leaves(h, system, b_leaf)
+            b_est, b_var, b_scale = estimate_radiosity(kept)
+        b_scale = max(b_scale, 1e-300)
 
     report(0.7, f"Form factors and visibility for {kept.n} links")
-    with timer("form_factors"):
+    with timer("final_links"):
         F, V, vis, gather = final_form_factors(h, kept.receiver, kept.source, occluder,
-                                               q.quadrature, q.rays, rng, scale, with_leaves=True)
+                                               q.quadrature, q.rays, rng, scale, with_leaves=True,
+                                               timer=timer)
     links = LinkSet(kept.receiver, kept.source, F, V, vis)
 
     report(0.9, "Solving per-lamp radiosity")

@@ -1,0 +1,226 @@
+"""Speed / accuracy curve of the quality presets on the Cornell box against Mitsuba 3.
+
+Scene: cornell_box() (17 patches, patch 16 is the lamp).  Reference: Mitsuba 3 patch radiosity
+at 2**22 spp per patch (tests/reference/mitsuba_ref.py, cached on disk).  Each preset runs in its
+own subprocess, twice (the faster total is kept, i.e. warm caches); "ultra" runs only if "high"
+took < 15 s and gets a 120 s budget (subprocess timeout), else it is recorded as "skipped" /
+"timeout".  Error: relative error of B over the 16 non-lamp patches, all 3 channels.
+Writes benchmarks/results/cornell.md and cornell.png.
+
+    python benchmarks/bench_cornell.py
+"""
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+PRESETS = ("draft", "medium", "high")
+ULTRA_IF_HIGH_BELOW = 15.0
+ULTRA_BUDGET = 120.0
+REPEATS = 2
+SPP = 1 << 22
+
+
+def _setup_path():
+    for p in (str(ROOT), str(ROOT / "tests")):
+        if p not in sys.path:
+            sys.path.insert(0, p)
+
+
+def child(preset: str) -> None:
+    """Solve `preset` REPEATS times; print one JSON line per run (flushed, so that a run
+    completed before a timeout is still reported)."""
+    _setup_path()
+    from relight_addon.core.radiosity.precompute import solve_radiosity
+    from relight_addon.core.testscenes import cornell_box
+    scene = cornell_box()
+    for _ in range(REPEATS):
+        t0 = time.perf_counter()
+        sol = solve_radiosity(scene, preset)
+        B = sol.patch_radiosity()
+        total = time.perf_counter() - t0
+        stats = {k: (float(v) if isinstance(v, (float, np.floating)) else int(v))
+                 for k, v in sol.stats().items()}
+        print(json.dumps({"preset": preset, "total": total, "stats": stats,
+                          "B": np.asarray(B).tolist()}), flush=True)
+
+
+def run_preset(preset: str, timeout: float | None):
+    """Returns (best run dict or None, status)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", preset]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    status = "ok"
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        status = "timeout"
+    runs = []
+    for line in out.splitlines():
+        line = line.strip()
+        if line.startswith("{"):
+            try:
+                runs.append(json.loads(line))
+            except json.JSONDecodeError:
+                pass
+    if status == "ok" and proc.returncode != 0:
+        status = f"failed (rc {proc.returncode})"
+        sys.stderr.write(err[-3000:])
+    if not runs:
+        return None, status
+    best = min(runs, key=lambda r: r["total"])
+    best["n_runs"] = len(runs)
+    best["all_totals"] = [r["total"] for r in runs]
+    return best, status if status != "timeout" else f"timeout after {len(runs)} run(s)"
+
+
+def errors(B, ref, lamp):
+    mask = np.ones(len(ref), bool)
+    mask[lamp] = False
+    B, R = np.asarray(B)[mask], np.asarray(ref)[mask]
+    ok = np.abs(R) > 1e-12
+    rel = np.abs(B - R)[ok] / np.abs(R)[ok]
+    return float(rel.mean()), float(rel.max())
+
+
+def main():
+    _setup_path()
+    from reference.mitsuba_ref import patch_radiosity, relative_stderr
+    from relight_addon.core.testscenes import cornell_box
+    scene = cornell_box()
+    lamp = np.flatnonzero(scene.emission.sum(axis=1) > 0)
+    assert list(lamp) == [16], lamp
+    ref, ref_err = patch_radiosity(scene, spp=SPP, return_stderr=True)
+    others = np.setdiff1d(np.arange(scene.n_patches), lamp)
+    rse = relative_stderr(ref[others], ref_err[others])
+    noise_mean, noise_max = float(rse.mean()), float(rse.max())
+    print(f"Mitsuba noise: mean rel stderr {100 * noise_mean:.3f} %, max {100 * noise_max:.3f} %")
+
+    rows = []
+    for preset in PRESETS + ("ultra",):
+        if preset == "ultra":
+            high = next((r for r in rows if r["preset"] == "high" and r["run"]), None)
+            if high is None or high["run"]["total"] >= ULTRA_IF_HIGH_BELOW:
+                rows.append({"preset": preset, "run": None, "status": "skipped"})
+                print("ultra: skipped")
+                continue
+            run, status = run_preset(preset, ULTRA_BUDGET)
+        else:
+            run, status = run_preset(preset, None)
+        row = {"preset": preset, "run": run, "status": status}
+        if run is not None:
+            row["mean_err"], row["max_err"] = errors(run["B"], ref, lamp)
+            print(f"{preset}: total {run['total']:.3f} s (runs {['%.3f' % t for t in run['all_totals']]}), "
+                  f"mean err {100 * row['mean_err']:.3f} %, max {100 * row['max_err']:.3f} % [{status}]")
+        else:
+            print(f"{preset}: {status}")
+        rows.append(row)
+
+    write_md(rows, noise_mean, noise_max)
+    write_png(rows, noise_mean)
+    raw = [{k: v for k, v in r.items()} for r in rows]
+    print(f"wrote {RESULTS / 'cornell.md'} and {RESULTS / 'cornell.png'}")
+    return raw
+
+
+def write_md(rows, noise_mean, noise_max):
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    load = os.getloadavg()
+    now = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    hdr = ["preset", "elements", "leaves", "links", "refine s", "form factors s",
+           "visibility s", "final links s", "solve s", "total s", "mean rel err %",
+           "max rel err %"]
+    lines = [
+        "# Cornell box: quality presets vs Mitsuba 3",
+        "",
+        "Generated by `benchmarks/bench_cornell.py`. Scene `cornell_box()` (17 patches, patch 16 "
+        "is the lamp). Reference: Mitsuba 3 (`tests/reference/mitsuba_ref.py`, volpath + "
+        f"irradiancemeter, {SPP} spp per patch). Error: |B - B_ref| / B_ref over the 16 non-lamp "
+        "patches and all 3 channels. Each preset runs twice in its own process; the faster total "
+        "is shown. \"refine s\" includes the form factor / visibility time spent in the oracle; "
+        "\"form factors s\" and \"visibility s\" are the point-to-polygon and ray-casting time "
+        "wherever spent (refine and final links). \"total s\" is wall time of "
+        "`solve_radiosity` + `patch_radiosity()`.",
+        "",
+        "| " + " | ".join(hdr) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(hdr) - 1)) + "|",
+    ]
+    for r in rows:
+        run = r["run"]
+        if run is None:
+            lines.append(f"| {r['preset']} | " + " | ".join([r["status"]] + [""] * (len(hdr) - 2)) + " |")
+            continue
+        s = run["stats"]
+        g = lambda k: f"{s.get('t_' + k, 0.0):.3f}"
+        name = r["preset"] + ("" if r["status"] == "ok" else f" ({r['status']})")
+        lines.append("| " + " | ".join([
+            name, str(s["elements"]), str(s["leaves"]), str(s["links"]), g("refine"),
+            g("form_factors"), g("visibility"), g("final_links"), g("solve"),
+            f"{run['total']:.3f}", f"{100 * r['mean_err']:.3f}", f"{100 * r['max_err']:.3f}"]) + " |")
+    lines += [
+        "",
+        f"Mitsuba noise (relative standard error of the reference, 16 non-lamp patches x 3 "
+        f"channels): mean {100 * noise_mean:.3f} %, max {100 * noise_max:.3f} %.",
+        "",
+        "Other timings / solver info:",
+        "",
+    ]
+    for r in rows:
+        if r["run"] is None:
+            continue
+        s = r["run"]["stats"]
+        lines.append(f"- {r['preset']}: setup {s.get('t_setup', 0.0):.3f} s, iterations "
+                     f"{s.get('iterations')}, residual {s.get('residual', float('nan')):.2e}, "
+                     f"totals of the runs {', '.join('%.3f' % t for t in r['run']['all_totals'])} s")
+    lines += [
+        "",
+        f"Load average (1/5/15 min) at the end: {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}; "
+        f"{os.cpu_count()} CPUs; Python {platform.python_version()}; {platform.platform()}.",
+        f"Date: {now}.",
+        "",
+    ]
+    (RESULTS / "cornell.md").write_text("\n".join(lines))
+
+
+def write_png(rows, noise_mean):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    pts = [r for r in rows if r["run"] is not None]
+    x = [r["run"]["total"] for r in pts]
+    y = [100 * r["mean_err"] for r in pts]
+    ax.plot(x, y, "o-", color="C0")
+    for r, xi, yi in zip(pts, x, y):
+        ax.annotate(r["preset"], (xi, yi), textcoords="offset points", xytext=(6, 6))
+    ax.axhline(100 * noise_mean, color="gray", ls="--", lw=1,
+               label=f"Mitsuba noise (mean rel. stderr {100 * noise_mean:.2f} %)")
+    ax.set_xscale("log")
+    ax.set_xlabel("total solve time (s, log)")
+    ax.set_ylabel("mean relative error vs Mitsuba 3 (%)")
+    ax.set_title("Cornell box: quality presets")
+    ax.set_ylim(0, 1.15 * max(y + [100 * noise_mean]))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "cornell.png", dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) >= 3 and sys.argv[1] == "--child":
+        child(sys.argv[2])
+    else:
+        main()

@@ -1,0 +1,1 @@
+"""Independent references (Mitsuba 3) for the radiosity solver tests."""
