@@ -61,12 +61,13 @@ def _invert_linear_cdf(alpha, beta, xi):
     return np.clip(x, 0.0, 1.0)
 
 
-def area_uniform_uv(corners: np.ndarray, xi_u: np.ndarray, xi_v: np.ndarray):
+def area_uniform_uv(corners, xi_u: np.ndarray, xi_v: np.ndarray, coefficients=None):
     """Map uniform numbers in [0,1)^2 to (u, v) distributed uniformly in area on each patch.
 
-    corners (n, 4, 3); xi_u, xi_v (n, k).  Returns u, v of shape (n, k).
+    corners (n, 4, 3) (or None when ``coefficients`` = (j0, ju, jv), each (n,), are given, e.g.
+    precomputed once per element); xi_u, xi_v (n, k).  Returns u, v of shape (n, k).
     """
-    j0, ju, jv = jacobian_coefficients(corners)
+    j0, ju, jv = jacobian_coefficients(corners) if coefficients is None else coefficients
     j0, ju, jv = j0[:, None], ju[:, None], jv[:, None]
     # Marginal in v: integral over u of J = (j0 + ju/2) + jv v.
     v = _invert_linear_cdf(j0 + 0.5 * ju, jv + 0.0 * xi_v, xi_v)

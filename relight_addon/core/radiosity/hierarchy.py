@@ -89,6 +89,24 @@ class Hierarchy:
             self.n += 4 * k
         return self.first_child[ids]
 
+    def locate(self, ids: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The leaf under each element ``ids`` that contains its local parameter point (u, v)."""
+        ids = np.asarray(ids, np.int64).copy()
+        u = np.asarray(u, float).copy()
+        v = np.asarray(v, float).copy()
+        while True:
+            fc = self.first_child[ids]
+            inner = np.flatnonzero(fc >= 0)
+            if len(inner) == 0:
+                return ids
+            hu = u[inner] >= 0.5
+            hv = v[inner] >= 0.5
+            # Child order (see _CHILD_UV): 0 (lo, lo), 1 (hi, lo), 2 (hi, hi), 3 (lo, hi).
+            child = np.where(hv, np.where(hu, 2, 3), np.where(hu, 1, 0))
+            ids[inner] = fc[inner] + child
+            u[inner] = np.clip(2.0 * u[inner] - hu, 0.0, 1.0)
+            v[inner] = np.clip(2.0 * v[inner] - hv, 0.0, 1.0)
+
     def leaves(self) -> np.ndarray:
         return np.flatnonzero(self.view("first_child") < 0)
 

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.formfactor import point_to_polygon
-from ..geometry.sampling import area_uniform_uv, quadrature, stratified_unit_square
+from ..geometry.sampling import (area_uniform_uv, jacobian_coefficients, quadrature,
+                                 stratified_unit_square)
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
 
@@ -27,7 +28,11 @@ VISIBLE, PARTIAL, INVISIBLE = 0, 1, 2
 _ORACLE_UV = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 # Points closer than this fraction of the scene size to a plane count as on it.
 _PLANE_TOL = 1e-9
-# Chunk size (sample points) for the vectorised final form factors: bounds peak memory.
+# A (leaf, source) pair uses one quadrature point when the leaf's radius is below this fraction
+# of its gap to the source (the midpoint rule's error then stays under ~1e-3 of F).
+_FAR_RATIO = 0.25
+# Chunk sizes for the vectorised oracle (links) and final form factors (sample points).
+_CHUNK_LINKS = 100_000
 _CHUNK_POINTS = 400_000
 
 
@@ -113,6 +118,10 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float,
     if n == 0:
         z = np.zeros(0)
         return z, z.copy(), z.copy(), np.zeros(0, bool)
+    if n > _CHUNK_LINKS:                     # bound peak memory on large initial link sets
+        parts = [oracle_estimates(h, r[i:i + _CHUNK_LINKS], s[i:i + _CHUNK_LINKS], occluder, rays,
+                                  rng, scale, timer) for i in range(0, n, _CHUNK_LINKS)]
+        return tuple(np.concatenate(p) for p in zip(*parts))
     k = len(_ORACLE_UV)
     pts = bilinear_point(h.corners[r][:, None], _ORACLE_UV[None, :, 0], _ORACLE_UV[None, :, 1])
     with timer("form_factors"):
@@ -166,9 +175,9 @@ class LeafGather:
     """Leaf-level transport of a link set: for every (link, leaf under its receiver) pair, the
     leaf's own form factor to the link's source (unoccluded, and with visibility)."""
     leaf: np.ndarray       # leaf element id
-    source: np.ndarray     # source element id
+    source: np.ndarray     # source element id (a source leaf for ray-level entries)
     F: np.ndarray          # unoccluded, integrated over the leaf's own Gauss points
-    FV: np.ndarray         # with visibility
+    FV: np.ndarray         # with visibility (sums of entries per leaf give its transport)
 
 
 def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
@@ -201,12 +210,25 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     count = np.searchsorted(anc_sorted, np.arange(h.n), side="right") - first
 
     q_pts, q_w = quadrature(h.corners[leaves], m)      # (L, m*m, 3), (L, m*m)
+    jac = jacobian_coefficients(h.view("corners"))     # per element, for area-uniform sampling
+    radius = np.linalg.norm(h.view("corners") - h.view("centroid")[:, None], axis=2).max(axis=1)
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m
 
     pts_per_link = count[r] * mm
     link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(pts_per_link) // _CHUNK_POINTS)) + 1)
+
+    # A leaf far from every source it gathers from (relative to its size) needs one point: F is
+    # smooth there.  The choice is per leaf, not per pair, so that each leaf integrates all its
+    # sources on the same points and their form factors still sum to exactly one when closed.
+    leaf_near = np.zeros(h.n, bool)
+    for links in link_chunks:
+        lr, ls = r[links], s[links]
+        leaf_ids = leaf_of[_segment_ranges(first[lr], count[lr])]
+        pair_src = np.repeat(ls, count[lr])
+        gap = np.linalg.norm(h.centroid[leaf_ids] - h.centroid[pair_src], axis=1) - radius[pair_src]
+        leaf_near[leaf_ids[radius[leaf_ids] > _FAR_RATIO * gap]] = True
     for links in link_chunks:
         if len(links) == 0:
             continue
@@ -215,23 +237,27 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         leaf_ids = leaf_of[_segment_ranges(first[lr], nleaf)]           # per (link, leaf) pair
         link_of = np.repeat(np.arange(len(links)), nleaf)
         n_pairs = len(leaf_ids)
-        slot = leaf_slot[leaf_ids]
-        P = q_pts[slot].reshape(-1, 3)                                    # per (pair, point)
-        W = q_w[slot].reshape(-1)
-        pair_pt = np.repeat(np.arange(n_pairs), mm)
+        near = leaf_near[leaf_ids]
+        near_pairs = np.flatnonzero(near)
+        far_pairs = np.flatnonzero(~near)
+        slot = leaf_slot[leaf_ids[near_pairs]]
+        P = np.concatenate([q_pts[slot].reshape(-1, 3), h.centroid[leaf_ids[far_pairs]]])
+        W = np.concatenate([q_w[slot].reshape(-1), h.area[leaf_ids[far_pairs]]])
+        pair_pt = np.concatenate([np.repeat(near_pairs, mm), far_pairs])
         link_pt = link_of[pair_pt]
         src = ls[link_pt]
+        points_per_link = np.bincount(link_pt, minlength=len(links))
         with timer("form_factors"):
             f = point_to_polygon(P, h.normal[lr][link_pt], h.corners[src], h.normal[src])
         if occluder is None or rays <= 0:
             free_frac = np.ones(len(P))
         else:
-            per_pt = np.maximum(1, -(-rays // (nleaf * mm)))              # ceil, per link
+            per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
             ray_count = per_pt[link_pt]
             ray_pt = np.repeat(np.arange(len(P)), ray_count)
             ray_src = src[ray_pt]
             xi_u, xi_v = rng.random((2, len(ray_pt), 1))
-            u, v = area_uniform_uv(h.corners[ray_src], xi_u, xi_v)
+            u, v = area_uniform_uv(None, xi_u, xi_v, tuple(j[ray_src] for j in jac))
             Q = bilinear_point(h.corners[ray_src], u[:, 0], v[:, 0])
             recv_el = lr[link_pt][ray_pt]
             counts = _mutually_in_front(h, recv_el, ray_src, P[ray_pt], Q)
@@ -248,10 +274,27 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         wsum = np.bincount(link_pt, W, len(links))
         F[links] = np.bincount(link_pt, W * f, len(links)) / np.maximum(wsum, 1e-300)
         Fv[links] = np.bincount(link_pt, W * f * free_frac, len(links)) / np.maximum(wsum, 1e-300)
-        if with_leaves:
-            pw = np.maximum(np.bincount(pair_pt, W, n_pairs), 1e-300)
-            parts.append(LeafGather(leaf_ids, ls[link_of], np.bincount(pair_pt, W * f, n_pairs) / pw,
-                                    np.bincount(pair_pt, W * f * free_frac, n_pairs) / pw))
+        if not with_leaves:
+            continue
+        pw = np.maximum(np.bincount(pair_pt, W, n_pairs), 1e-300)
+        pair_F = np.bincount(pair_pt, W * f, n_pairs) / pw
+        if occluder is None or rays <= 0:
+            parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_F.copy()))
+            continue
+        # Partially visible links gather from the source leaf each free ray lands in, rather
+        # than from the source's mean radiosity: a hidden part of a source is often dark too
+        # (floor under a box), and the mean would count that darkness a second time.
+        partial_link = (np.bincount(link_ray, blocked, len(links)) > 0) & (
+            np.bincount(link_ray, free, len(links)) > 0)
+        by_ray = partial_link[link_pt] & (tried > 0)
+        pair_FV = np.bincount(pair_pt, np.where(by_ray, 0.0, W * f * free_frac), n_pairs) / pw
+        parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_FV))
+        use = free & by_ray[ray_pt]
+        if use.any():
+            rp = ray_pt[use]
+            weight = W[rp] * f[rp] / np.maximum(tried[rp], 1) / pw[pair_pt[rp]]
+            src_leaf = h.locate(ray_src[use], u[use, 0], v[use, 0])
+            parts.append(LeafGather(leaf_ids[pair_pt[rp]], src_leaf, np.zeros(len(rp)), weight))
 
     if occluder is None or rays <= 0:
         seen_free[:] = True
