@@ -29,8 +29,8 @@ _ORACLE_UV = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0
 # Points closer than this fraction of the scene size to a plane count as on it.
 _PLANE_TOL = 1e-9
 # A (leaf, source) pair uses one quadrature point when the leaf's radius is below this fraction
-# of its gap to the source (the midpoint rule's error then stays under ~1e-3 of F).
-_FAR_RATIO = 0.25
+# of its gap to the source (A_r F_rs = A_s F_sr then holds to about 1 % at the 95th percentile).
+_FAR_RATIO = 0.15
 # Chunk sizes for the vectorised oracle (links) and final form factors (sample points).
 _CHUNK_LINKS = 100_000
 _CHUNK_POINTS = 400_000
@@ -158,7 +158,10 @@ def _mutually_in_front(h, r, s, p, q):
     F already clips each source to the part in front of the receiver point; a visibility ray to
     a source point behind that plane would only measure the clipping again (and hit the
     receiver's own object), so such samples are left out of the visible fraction."""
-    return (np.einsum("ij,ij->i", q - p, h.normal[r]) > 0) & (np.einsum("ij,ij->i", p - q, h.normal[s]) > 0)
+    d = q - p
+    nr, ns = h.normal[r], h.normal[s]
+    return ((d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1] + d[:, 2] * nr[:, 2] > 0)
+            & (d[:, 0] * ns[:, 0] + d[:, 1] * ns[:, 1] + d[:, 2] * ns[:, 2] < 0))
 
 
 def _segment_ranges(starts, counts):
@@ -211,6 +214,10 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
 
     q_pts, q_w = quadrature(h.corners[leaves], m)      # (L, m*m, 3), (L, m*m)
     jac = jacobian_coefficients(h.view("corners"))     # per element, for area-uniform sampling
+    # Bilinear map in power form, P = a + u (b - a) + v (d - a) + u v (a - b + c - d).
+    cs = h.view("corners")
+    corner_a, edge_u, edge_v = cs[:, 0], cs[:, 1] - cs[:, 0], cs[:, 3] - cs[:, 0]
+    twist = cs[:, 0] - cs[:, 1] + cs[:, 2] - cs[:, 3]
     radius = np.linalg.norm(h.view("corners") - h.view("centroid")[:, None], axis=2).max(axis=1)
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
@@ -258,7 +265,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             ray_src = src[ray_pt]
             xi_u, xi_v = rng.random((2, len(ray_pt), 1))
             u, v = area_uniform_uv(None, xi_u, xi_v, tuple(j[ray_src] for j in jac))
-            Q = bilinear_point(h.corners[ray_src], u[:, 0], v[:, 0])
+            uu, vv = u[:, :1], v[:, :1]
+            Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
+                 + (uu * vv) * twist[ray_src])
             recv_el = lr[link_pt][ray_pt]
             counts = _mutually_in_front(h, recv_el, ray_src, P[ray_pt], Q)
             p0, q0 = _offset_segments(h, recv_el, ray_src, P[ray_pt], Q, scale)

@@ -35,6 +35,7 @@ class RadiositySolution:
     basis: np.ndarray                 # (k, L, 3) per-lamp leaf radiosity
     info: SolveInfo
     timings: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)   # rays cast
 
     @property
     def leaves(self):
@@ -66,7 +67,20 @@ class RadiositySolution:
         return {"patches": self.scene.n_patches, "elements": self.hierarchy.n,
                 "leaves": len(self.leaves), "links": self.links.n,
                 "iterations": self.info.iterations, "residual": self.info.residual,
+                "gather_entries": int(self.system.M.nnz), **self.counts,
                 **{f"t_{k}": v for k, v in self.timings.items()}}
+
+
+class _CountingOccluder:
+    """Counts the segments a ray caster tests, for the throughput figures in stats()."""
+
+    def __init__(self, occluder):
+        self.occluder = occluder
+        self.rays = 0
+
+    def segments_occluded(self, origins, ends):
+        self.rays += len(origins)
+        return self.occluder.segments_occluded(origins, ends)
 
 
 class _Timer(dict):
@@ -169,6 +183,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             from ..geometry.raycast import make_occluder
             tris = scene.occluder_triangles()
             occluder = make_occluder(tris) if len(tris) else None
+        if occluder is not None:
+            occluder = _CountingOccluder(occluder)
         h = Hierarchy(scene)
         total_area = float(h.view("area").sum())
         min_area = q.min_area * total_area
@@ -256,5 +272,6 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         E = _lamp_emission(scene, system.patch)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
+    counts = {"rays": occluder.rays if occluder is not None else 0}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
-                             dict(timer))
+                             dict(timer), counts)

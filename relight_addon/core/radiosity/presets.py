@@ -30,7 +30,7 @@ PRESETS = {
     "draft": Quality("draft", eps_bf=0.02, eps_bfv=0.01, min_area=2e-3, quadrature=1, rays=4,
                      oracle_rays=4, passes=2),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
-                      rays=8, oracle_rays=4),
+                      rays=8, oracle_rays=4, passes=2),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
                     oracle_rays=8),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,

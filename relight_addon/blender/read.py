@@ -1,0 +1,562 @@
+"""Read a Blender scene into a :class:`SceneData` (the bpy -> maths half of the bridge).
+
+``read_scene(context_or_scene, depsgraph=None, roles=None) -> (SceneData, ReadReport)``
+
+Geometry: every renderable mesh-like object (mesh, curve, surface, text, metaball) is evaluated
+(modifiers applied, ``evaluated_get`` + ``to_mesh`` / ``to_mesh_clear``), its world matrix is
+applied, triangles become ``(a, b, c, c)`` and quads ``(a, b, c, d)`` in Blender's loop order
+(counter-clockwise around the face normal), n-gons are split with ``mesh.loop_triangles``.
+SceneData itself splits non-planar quads and drops zero-area faces (counted in the report).
+Everything is gathered with ``foreach_get`` into float32/int32 buffers and numpy, never with
+per-face Python loops; the loops below run over objects, materials and lamps only.
+
+Conventions established by experiment with Cycles in Blender 5.0.1 (the measurements are
+repeated by ``tests/test_bridge_read.py``):
+
+* ``Image.pixels`` of a byte (8-bit) image returns the stored values / 255, still encoded in the
+  image's colour space (an sRGB byte 128 reads 0.50196); float images (16-bit PNG, EXR, HDR)
+  come back already converted to linear (the same 16-bit PNG tagged sRGB reads 0.21586).  So
+  byte images in sRGB are decoded with the sRGB curve here, float images are used as they are,
+  and images tagged Non-Color / Linear are used as they are.  Alpha is ignored.
+* Area light (Normalize on, the default): a white diffuse plane under a 100 W, 1 m square light
+  measured 100 W/m^2 exitance (ratio 0.9998 to the point-to-polygon prediction), the same light
+  at 0.5 m measured 400 W/m^2: exitance ``M = P * 2**exposure * colour / A`` with ``A`` the
+  world-space area (object scale included: a 0.6 m disk scaled (1, 2, 1) matched to 0.05 %),
+  i.e. the lamp emits its power ``P`` as a Lambertian emitter (radiance ``M / pi``).  With
+  Normalize off the power is per unit area: ``M = P * 2**exposure * colour``.  The light's
+  ``diffuse_factor`` scales what diffuse surfaces receive and is folded into M.
+* Emission shader / Principled "Emission Strength" ``S`` with colour ``C``: radiance ``S * C``
+  (a surface of strength 1 renders as pixel value 1), so exitance ``M = pi * S * C``
+  (measured 3.1398 / pi = 0.9994).  Cycles mesh emission is two-sided; here a face emits from its
+  front side only (documented limitation).
+
+Roles (object custom property ``relight_role`` or the ``roles`` argument, name -> role):
+``"relit"`` (default for renderable mesh objects), ``"occluder"`` (patches with reflectance 0
+and no emission that only block rays and take no part in the display), ``"ignored"`` (not read).
+Objects hidden from rendering are ignored.
+
+Nothing in the user's data is modified: evaluated meshes are freed with ``to_mesh_clear``, no
+selection, mode, or datablock changes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.scene import SceneData
+
+ROLES = ("relit", "occluder", "ignored")
+ROLE_PROPERTY = "relight_role"
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+AREA_SHAPES = {"SQUARE", "RECTANGLE", "DISK", "ELLIPSE"}
+# A disk/ellipse lamp is a fan of this many planar quads around its centre (2 * DISK_QUADS
+# polygon vertices), scaled so that its area equals the ellipse's.
+DISK_QUADS = 8
+RHO_MAX = 0.99
+DEFAULT_RHO = 0.8  # Blender's default base colour
+# Colour spaces whose byte values are already linear (everything else is decoded as sRGB).
+_LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear Rec.2020", "Linear CIE-XYZ D65",
+                  "Linear CIE-XYZ E", "Linear DCI-P3 D65", "Linear FilmLight E-Gamut", "ACEScg",
+                  "ACES2065-1", "Working Space", "Raw", "Linear", "XYZ"}
+
+
+@dataclass
+class ImageTexels:
+    """One material image: linear RGB texels (h, w, 3) float32, row 0 at the bottom (Blender)."""
+    name: str
+    texels: np.ndarray
+    mean: np.ndarray
+    filepath: str = ""
+    colorspace: str = ""
+
+
+@dataclass
+class ReadReport:
+    objects: int = 0            # objects read as geometry (relit + occluder)
+    faces: int = 0              # input faces (polygons of the evaluated meshes)
+    triangles: int = 0
+    quads: int = 0
+    ngons_split: int = 0        # n-gons split into triangles
+    ngon_triangles: int = 0     # triangles they produced
+    zero_area_skipped: int = 0  # faces dropped by SceneData as degenerate
+    duplicates_skipped: int = 0
+    lamps: int = 0
+    lamp_patches: int = 0
+    emissive_faces: int = 0
+    patches: int = 0
+    ignored_objects: list = field(default_factory=list)
+    groups: list = field(default_factory=list)  # group index -> (object name, material name)
+    warnings: list = field(default_factory=list)
+    errors: list = field(default_factory=list)
+    viewpoint: tuple | None = None
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+    def warn(self, message: str):
+        if message not in self.warnings:
+            self.warnings.append(message)
+
+
+# -- colour ------------------------------------------------------------------------------------
+
+def srgb_to_linear(x):
+    x = np.asarray(x, dtype=np.float32)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def image_texels(image):
+    """Linear RGB texels (h, w, 3) float32 of a bpy image, or None when it has no pixels."""
+    try:
+        w, h = image.size[:]
+    except Exception:
+        return None
+    if w == 0 or h == 0 or not image.has_data:
+        return None
+    channels = image.channels
+    buf = np.empty(w * h * channels, dtype=np.float32)
+    image.pixels.foreach_get(buf)
+    px = buf.reshape(h, w, channels)
+    if channels >= 3:
+        rgb = px[..., :3]
+    else:
+        rgb = np.repeat(px[..., :1], 3, axis=-1)
+    space = image.colorspace_settings.name
+    if not image.is_float and space not in _LINEAR_SPACES:
+        rgb = srgb_to_linear(rgb)
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+# -- materials ---------------------------------------------------------------------------------
+
+def _output_surface_node(tree):
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    if not outputs:
+        return None
+    active = [n for n in outputs if n.is_active_output] or outputs
+    for n in active:
+        if n.target in {"ALL", "CYCLES"}:
+            active = [n]
+            break
+    sock = active[0].inputs.get("Surface")
+    if sock is None or not sock.is_linked:
+        return None
+    return _through_reroutes(sock.links[0].from_node)
+
+
+def _through_reroutes(node):
+    while node is not None and node.bl_idname == "NodeReroute":
+        sock = node.inputs[0]
+        node = _through_reroutes(sock.links[0].from_node) if sock.is_linked else None
+    return node
+
+
+def _find_image_node(sock, depth=6):
+    """The Image Texture node feeding a socket, directly or through a few nodes.
+    Returns (node, direct)."""
+    if sock is None or not sock.is_linked:
+        return None, True
+    node = _through_reroutes(sock.links[0].from_node)
+    if node is None:
+        return None, True
+    if node.bl_idname == "ShaderNodeTexImage":
+        return node, True
+    if depth == 0:
+        return None, False
+    for inp in node.inputs:
+        found, _ = _find_image_node(inp, depth - 1)
+        if found is not None:
+            return found, False
+    return None, False
+
+
+def _rgb(value):
+    v = np.asarray(value[:], dtype=np.float64)
+    return np.broadcast_to(v[:3] if v.size >= 3 else v[:1], (3,)).copy()
+
+
+def _socket_value(node, *names):
+    for name in names:
+        s = node.inputs.get(name)
+        if s is not None and hasattr(s, "default_value"):
+            return s
+    return None
+
+
+@dataclass
+class _MaterialInfo:
+    rho: np.ndarray
+    emission_radiance: np.ndarray  # W/(m^2 sr); exitance is pi times this
+    image_node: object = None
+    uv_map: str = ""               # "" -> the active render UV map
+
+
+def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -> _MaterialInfo:
+    black = np.zeros(3)
+    if mat is None:
+        return _MaterialInfo(np.full(3, DEFAULT_RHO), black)
+    name = mat.name
+    tree = mat.node_tree if getattr(mat, "use_nodes", True) else None
+    if tree is None:
+        return _MaterialInfo(_rgb(mat.diffuse_color), black)
+    shader = _output_surface_node(tree)
+    if shader is None:
+        report.warn(f"Material '{name}' has no surface shader: reflectance 0 used")
+        return _MaterialInfo(np.zeros(3), black)
+    kind = shader.bl_idname
+    emission = black
+    if kind == "ShaderNodeEmission":
+        strength = float(shader.inputs["Strength"].default_value)
+        emission = _rgb(shader.inputs["Color"].default_value) * strength
+        return _MaterialInfo(np.zeros(3), np.maximum(emission, 0.0))
+    colour_sock = _socket_value(shader, "Base Color", "Color")
+    if colour_sock is None:
+        report.warn(f"Material '{name}' uses an unsupported shader ({shader.name}): "
+                    f"default reflectance {DEFAULT_RHO} used")
+        return _MaterialInfo(np.full(3, DEFAULT_RHO), black)
+    if kind == "ShaderNodeBsdfPrincipled":
+        strength_sock = shader.inputs.get("Emission Strength")
+        colour_e = shader.inputs.get("Emission Color")
+        if strength_sock is not None and colour_e is not None:
+            s = float(strength_sock.default_value)
+            if s > 0:
+                emission = np.maximum(_rgb(colour_e.default_value) * s, 0.0)
+                if colour_e.is_linked or strength_sock.is_linked:
+                    report.warn(f"Material '{name}': linked emission inputs are not read, "
+                                "their default values are used")
+    elif kind != "ShaderNodeBsdfDiffuse":
+        report.warn(f"Material '{name}' uses {shader.name}: its '{colour_sock.name}' is read "
+                    "as a diffuse reflectance")
+    base = _rgb(colour_sock.default_value)
+    info = _MaterialInfo(base, emission)
+    node, direct = _find_image_node(colour_sock)
+    if node is None:
+        if colour_sock.is_linked:
+            report.warn(f"Material '{name}': base colour comes from nodes that are not read; "
+                        "its default value is used")
+        elif wants_texture:
+            report.warn(f"No image texture on material '{name}' (base colour used)")
+        return info
+    if not direct:
+        report.warn(f"Material '{name}': the image '{node.image.name if node.image else '?'}' "
+                    "reaches the base colour through other nodes, which are ignored")
+    image = node.image
+    if image is None:
+        report.warn(f"Material '{name}': its Image Texture node has no image (base colour used)")
+        return info
+    image = getattr(image, "original", image) or image
+    key = image.name
+    if key not in images:
+        texels = image_texels(image)
+        if texels is None:
+            images[key] = None
+            report.warn(f"Image '{image.name}' of material '{name}' has no pixels "
+                        f"(missing file '{image.filepath}'?): base colour used")
+        else:
+            images[key] = ImageTexels(image.name, texels, texels.reshape(-1, 3).mean(axis=0, dtype=np.float64),
+                                      image.filepath, image.colorspace_settings.name)
+    if images[key] is None:
+        return info
+    info.rho = images[key].mean.astype(np.float64)
+    info.image_node = key
+    vec = node.inputs.get("Vector")
+    if vec is not None and vec.is_linked:
+        src = _through_reroutes(vec.links[0].from_node)
+        if src is not None and src.bl_idname == "ShaderNodeUVMap":
+            info.uv_map = src.uv_map
+        elif src is not None:
+            report.warn(f"Material '{name}': image '{key}' uses {src.name} coordinates; "
+                        "the active render UV map is read instead")
+    return info
+
+
+# -- geometry ----------------------------------------------------------------------------------
+
+def _get(collection, attr, count, width, dtype):
+    buf = np.empty(count * width, dtype=dtype)
+    if count:
+        collection.foreach_get(attr, buf)
+    return buf.reshape(count, width) if width > 1 else buf
+
+
+def _transform(matrix, points):
+    m = np.array(matrix, dtype=np.float64)
+    return points @ m[:3, :3].T + m[:3, 3]
+
+
+def _mesh_faces(me, report: ReadReport):
+    """Per patch: corner loop indices (p, 4) and source polygon index (p,)."""
+    n_poly = len(me.polygons)
+    start = _get(me.polygons, "loop_start", n_poly, 1, np.int32)
+    total = _get(me.polygons, "loop_total", n_poly, 1, np.int32)
+    tri = np.flatnonzero(total == 3)
+    quad = np.flatnonzero(total == 4)
+    ngon = np.flatnonzero(total > 4)
+    parts = [start[tri, None] + np.array([0, 1, 2, 2], np.int32),
+             start[quad, None] + np.array([0, 1, 2, 3], np.int32)]
+    polys = [tri, quad]
+    if len(ngon):
+        lt = me.loop_triangles
+        n_lt = len(lt)
+        lt_loops = _get(lt, "loops", n_lt, 3, np.int32)
+        lt_poly = _get(lt, "polygon_index", n_lt, 1, np.int32)
+        keep = np.flatnonzero(total[lt_poly] > 4)
+        parts.append(lt_loops[keep][:, [0, 1, 2, 2]])
+        polys.append(lt_poly[keep])
+        report.ngon_triangles += len(keep)
+    report.faces += n_poly
+    report.triangles += len(tri)
+    report.quads += len(quad)
+    report.ngons_split += len(ngon)
+    return np.concatenate(parts).astype(np.int64), np.concatenate(polys).astype(np.int64)
+
+
+def _uv_layer(me, name):
+    layers = me.uv_layers
+    if name:
+        layer = layers.get(name)
+        if layer is not None:
+            return layer
+    for layer in layers:
+        if layer.active_render:
+            return layer
+    return layers.active if len(layers) else None
+
+
+def _uv_array(layer, n_loops):
+    buf = np.empty(n_loops * 2, dtype=np.float32)
+    if n_loops:
+        layer.uv.foreach_get("vector", buf)
+    return buf.reshape(n_loops, 2).astype(np.float64)
+
+
+# -- lamps -------------------------------------------------------------------------------------
+
+def _area_light_polygon(light):
+    """Local-space quads (q, 4, 3) of an area light, facing local -Z (normal (c-a)x(d-b) = -Z)."""
+    sx = float(light.size)
+    sy = float(light.size_y) if light.shape in {"RECTANGLE", "ELLIPSE"} else sx
+    if light.shape in {"SQUARE", "RECTANGLE"}:
+        hx, hy = sx / 2, sy / 2
+        return np.array([[[-hx, -hy, 0], [-hx, hy, 0], [hx, hy, 0], [hx, -hy, 0]]], float)
+    n = 2 * DISK_QUADS
+    # Regular n-gon with the ellipse's area: (n/2) sin(2 pi/n) r^2 = pi r^2 * scale^2.
+    scale = np.sqrt(np.pi / (0.5 * n * np.sin(2 * np.pi / n)))
+    t = -np.arange(n + 1) * (2 * np.pi / n)  # clockwise seen from +Z = counter-clockwise from -Z
+    ring = np.stack([0.5 * sx * scale * np.cos(t), 0.5 * sy * scale * np.sin(t), np.zeros_like(t)], 1)
+    i = np.arange(0, n, 2)
+    centre = np.zeros((len(i), 3))
+    return np.stack([centre, ring[i], ring[i + 1], ring[(i + 2)]], axis=1)
+
+
+def area_light_exitance(light, area: float) -> np.ndarray:
+    """Exitance (W/m^2, RGB) of a Blender area light of world-space area ``area``."""
+    power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    colour = _rgb(light.color)
+    if getattr(light, "use_temperature", False):
+        colour = colour * _rgb(light.temperature_color)
+    colour = colour * float(getattr(light, "diffuse_factor", 1.0))
+    if getattr(light, "normalize", True):
+        return colour * power / max(area, 1e-300)
+    return colour * power
+
+
+# -- the reader --------------------------------------------------------------------------------
+
+def _role(obj, roles):
+    if roles and obj.name in roles:
+        role = roles[obj.name]
+    else:
+        role = obj.get(ROLE_PROPERTY, "relit") if hasattr(obj, "get") else "relit"
+    return role if role in ROLES else None
+
+
+def read_scene(context_or_scene, depsgraph=None, roles=None):
+    """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene."""
+    import bpy  # noqa: F401  (the bridge is the only place bpy is used)
+
+    if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
+        scene = context_or_scene.scene
+        view_layer = context_or_scene.view_layer
+        if depsgraph is None:
+            depsgraph = context_or_scene.evaluated_depsgraph_get()
+    else:
+        scene = context_or_scene
+        view_layer = scene.view_layers[0] if depsgraph is None else depsgraph.view_layer
+        if depsgraph is None:
+            depsgraph = view_layer.depsgraph
+    report = ReadReport()
+    images: dict = {}            # image name -> ImageTexels | None
+    mat_cache: dict = {}
+    corners, rho, emission, lamp, occluder, group, uvs, image_idx = ([] for _ in range(8))
+    lamp_names: list = []
+    emissive_lamp: dict = {}     # (object, material) -> lamp index
+
+    for obj in view_layer.objects:
+        if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
+            continue
+        role = _role(obj, roles)
+        if role is None:
+            report.warn(f"Object '{obj.name}': unknown {ROLE_PROPERTY} '{obj.get(ROLE_PROPERTY)}', "
+                        "read as relit")
+            role = "relit"
+        if obj.hide_render:
+            report.ignored_objects.append(obj.name)
+            continue
+        if role == "ignored":
+            report.ignored_objects.append(obj.name)
+            continue
+        ev = obj.evaluated_get(depsgraph)
+        if obj.type == "LIGHT":
+            light = ev.data
+            if light.type != "AREA" or light.shape not in AREA_SHAPES:
+                report.warn(f"Light '{obj.name}' ({light.type.lower()}) is not supported yet and "
+                            "is ignored: use an area light or an emissive face")
+                continue
+            if float(getattr(light, "spread", np.pi)) < np.pi - 1e-6:
+                report.warn(f"Light '{obj.name}': spread below 180 degrees is treated as a "
+                            "Lambertian (180 degree) emitter")
+            if getattr(light, "use_nodes", False) and light.node_tree is not None:
+                report.warn(f"Light '{obj.name}': light nodes are ignored")
+            m = np.array(ev.matrix_world, dtype=np.float64)
+            local = _area_light_polygon(light)
+            if np.linalg.det(m[:3, :3]) < 0:
+                local = local[:, ::-1]
+            quads = _transform(m, local.reshape(-1, 3)).reshape(-1, 4, 3)
+            cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
+            area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
+            if not area > 0:
+                report.warn(f"Light '{obj.name}' has zero area and is ignored")
+                continue
+            exitance = area_light_exitance(light, area)
+            if not np.any(exitance > 0):
+                report.warn(f"Light '{obj.name}' has no power and is ignored")
+                continue
+            k = len(lamp_names)
+            lamp_names.append(obj.name)
+            q = len(quads)
+            corners.append(quads)
+            rho.append(np.zeros((q, 3)))
+            emission.append(np.tile(exitance, (q, 1)))
+            lamp.append(np.full(q, k))
+            occluder.append(np.zeros(q, bool))
+            group.append(np.full(q, len(report.groups)))
+            report.groups.append((obj.name, ""))
+            uvs.append(np.zeros((q, 4, 2)))
+            image_idx.append(np.full(q, -1))
+            report.lamps += 1
+            report.lamp_patches += q
+            continue
+
+        # -- geometry --
+        try:
+            me = ev.to_mesh()
+        except RuntimeError:
+            me = None
+        if me is None:
+            continue
+        try:
+            n_v = len(me.vertices)
+            n_loops = len(me.loops)
+            if n_v == 0 or len(me.polygons) == 0:
+                continue
+            report.objects += 1
+            co = _transform(ev.matrix_world, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
+            loop_vert = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
+            loops, poly = _mesh_faces(me, report)
+            if np.linalg.det(np.array(ev.matrix_world)[:3, :3]) < 0:
+                loops = loops[:, [0, 3, 2, 1]]  # mirrored: keep the winding (a, b, c, c) -> (a, c, c, b)
+                tri = loops[:, 1] == loops[:, 2]
+                loops[tri] = loops[tri][:, [0, 2, 3, 3]]
+            p = len(loops)
+            obj_corners = co[loop_vert[loops]]
+            mat_index = _get(me.polygons, "material_index", len(me.polygons), 1, np.int32)[poly]
+            slots = ev.material_slots
+            obj_rho = np.zeros((p, 3))
+            obj_em = np.zeros((p, 3))
+            obj_lamp = np.full(p, -1)
+            obj_group = np.zeros(p, np.int64)
+            obj_uv = np.zeros((p, 4, 2))
+            obj_img = np.full(p, -1)
+            uv_cache: dict = {}
+            for mi in np.unique(mat_index):
+                sel = mat_index == mi
+                mat = slots[int(mi)].material if 0 <= mi < len(slots) else None
+                if mat is not None:
+                    mat = getattr(mat, "original", mat) or mat
+                mkey = (mat.name if mat is not None else None)
+                if mkey not in mat_cache:
+                    mat_cache[mkey] = _material_info(mat, report, images, role == "relit")
+                info = mat_cache[mkey]
+                obj_group[sel] = len(report.groups)
+                report.groups.append((obj.name, mat.name if mat is not None else ""))
+                if role == "occluder":
+                    continue
+                obj_rho[sel] = np.clip(info.rho, 0.0, RHO_MAX)
+                if np.any(info.emission_radiance > 0):
+                    key = (obj.name, mkey)
+                    if key not in emissive_lamp:
+                        emissive_lamp[key] = len(lamp_names)
+                        lamp_names.append(f"{obj.name}/{mkey}")
+                        report.lamps += 1
+                    obj_lamp[sel] = emissive_lamp[key]
+                    obj_em[sel] = np.pi * info.emission_radiance
+                    report.emissive_faces += int(sel.sum())
+                layer = _uv_layer(me, info.uv_map)
+                if layer is None:
+                    if info.image_node is not None:
+                        report.warn(f"No UV map on object '{obj.name}': image '{info.image_node}' "
+                                    "cannot be mapped (its mean colour is used)")
+                    continue
+                if info.uv_map and layer.name != info.uv_map:
+                    report.warn(f"Object '{obj.name}' has no UV map '{info.uv_map}' used by "
+                                f"material '{mkey}': '{layer.name}' is read instead")
+                if layer.name not in uv_cache:
+                    uv_cache[layer.name] = _uv_array(layer, n_loops)
+                obj_uv[sel] = uv_cache[layer.name][loops[sel]]
+                if info.image_node is not None:
+                    names = list(k for k, v in images.items() if v is not None)
+                    obj_img[sel] = names.index(info.image_node)
+            corners.append(obj_corners)
+            rho.append(obj_rho)
+            emission.append(obj_em)
+            lamp.append(obj_lamp)
+            occluder.append(np.ones(p, bool))
+            group.append(obj_group)
+            uvs.append(obj_uv)
+            image_idx.append(obj_img)
+        finally:
+            ev.to_mesh_clear()
+
+    cam = scene.camera
+    viewpoint = None
+    if cam is not None:
+        viewpoint = np.array(cam.evaluated_get(depsgraph).matrix_world.translation, dtype=np.float64)
+        report.viewpoint = tuple(float(x) for x in viewpoint)
+    else:
+        report.warn("The scene has no active camera: no viewpoint")
+
+    image_list = [v for v in images.values() if v is not None]
+
+    def cat(parts, shape, dtype):
+        return np.concatenate(parts).astype(dtype) if parts else np.zeros(shape, dtype)
+
+    data = SceneData(
+        corners=cat(corners, (0, 4, 3), np.float64), rho=cat(rho, (0, 3), np.float64),
+        emission=cat(emission, (0, 3), np.float64), lamp=cat(lamp, (0,), np.int32),
+        lamp_names=lamp_names, occluder=cat(occluder, (0,), bool), group=cat(group, (0,), np.int32),
+        uv=cat(uvs, (0, 4, 2), np.float64), image=cat(image_idx, (0,), np.int32),
+        images=image_list, viewpoint=viewpoint)
+    report.zero_area_skipped = data.dropped_degenerate
+    report.duplicates_skipped = data.dropped_duplicate
+    report.patches = data.n_patches
+    if report.zero_area_skipped:
+        report.warn(f"{report.zero_area_skipped} zero-area face(s) skipped")
+    if data.n_patches == 0 or not np.any(data.lamp >= 0):
+        if not lamp_names:
+            report.errors.append("The scene has no lamps: add an area light or an emissive face")
+    if not np.any(data.occluder) and data.n_patches == 0:
+        report.errors.append("The scene has no usable faces")
+    return data, report
