@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..scene import SceneData
+from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .hierarchy import Hierarchy
 from .links import LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates
 from .presets import Quality, get_preset
@@ -192,13 +193,34 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         e_max = scene.emission.max(axis=1)
         receives = rho_max > 0
         sends = (rho_max > 0) | (e_max > 0)
-        r0, s0 = initial_pairs(h, receives, sends, scale)
+        tree = None
+        cX = cY = np.zeros(0, np.int64)
+        if scene.n_patches > q.cluster_above:
+            # Far groups of patches exchange light through cluster links: no O(P^2) start.
+            tree = build_cluster_tree(scene.corners, np.arange(scene.n_patches))
+            cX, cY, cV, r0, s0 = link_clusters(
+                tree, q.separation,
+                lambda X, Y: cluster_visibility(tree, h, X, Y, occluder, q.rays, rng, scale))
+            keep = receives[r0] & sends[s0]
+            r0, s0 = r0[keep], s0[keep]
+            keep = facing(h, r0, s0, scale)
+            r0, s0 = r0[keep], s0[keep]
+        else:
+            r0, s0 = initial_pairs(h, receives, sends, scale)
+            cV = np.ones(0)
+
+    def leaf_system(receiver, source, transport, links_are_leaf_entries=False):
+        cls = LeafSystem if links_are_leaf_entries else LeafSystem.from_links
+        system = cls(h, receiver, source, transport, scene.rho)
+        if len(cX):
+            system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
+        return system
 
     # Per element, for the oracle: radiosity estimate (brightest channel) and its variation
     # over the element's leaves (the error of gathering from the element's mean radiosity).
     def estimate_radiosity(links: LinkSet):
         """Solve on the oracle's estimates: radiosity and its spread per element."""
-        system = LeafSystem.from_links(h, links.receiver, links.source, links.F * links.V, scene.rho)
+        system = leaf_system(links.receiver, links.source, links.F * links.V)
         B, _ = system.solve(scene.emission[system.patch], "gmres", tol=1e-4)
         b_leaf = B.max(axis=1)
         b_elem = system.P_up @ b_leaf
@@ -268,10 +290,10 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     report(0.9, "Solving per-lamp radiosity")
     with timer("solve"):
-        system = LeafSystem(h, gather.leaf, gather.source, gather.FV, scene.rho)
+        system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
         E = _lamp_emission(scene, system.patch)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
-    counts = {"rays": occluder.rays if occluder is not None else 0}
+    counts = {"rays": occluder.rays if occluder is not None else 0, "cluster_links": len(cX)}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
                              dict(timer), counts)

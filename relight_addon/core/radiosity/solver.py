@@ -53,6 +53,7 @@ class LeafSystem:
         slot[self.leaves] = np.arange(L)
         self.M = sp.csr_matrix((transport, (slot[leaf_ids], source)), shape=(L, n))
         self.rho = rho_patch[self.patch]                    # (L, 3)
+        self.U = self.W = None                              # cluster links: H += U (W B)
 
     @classmethod
     def from_links(cls, h: Hierarchy, receiver, source, transport, rho_patch):
@@ -63,13 +64,22 @@ class LeafSystem:
         M = (P_down @ G).tocoo()
         return cls(h, leaves[M.row], M.col, M.data, rho_patch)
 
+    def add_clusters(self, U, W):
+        """Add the low-rank transport of cluster links (see clusters.cluster_operator)."""
+        if U.shape[1]:
+            self.U, self.W = U, W
+        return self
+
     @property
     def n_leaves(self):
         return len(self.leaves)
 
     def gather(self, B):
         """Irradiance on every leaf, K B, for B of shape (L, c)."""
-        return self.M @ (self.P_up @ B)
+        H = self.M @ (self.P_up @ B)
+        if self.U is not None:
+            H = H + self.U @ (self.W @ B)
+        return H
 
     def apply(self, B):
         """rho * K B for B of shape (L, 3) or (L, 3, k)."""
@@ -126,16 +136,28 @@ class LeafSystem:
         rows = [self.M[g] for g in groups]
         B = Ef.copy()
         elem = self.P_up @ B
+        clustered = self.U is not None
+        if clustered:
+            W_csc = self.W.tocsc()
+            wcols = [W_csc[:, g] for g in groups]
+            U_csr = self.U.tocsr()
+            urows = [U_csr[g] for g in groups]
+            far = self.W @ B
         hist = []
         norm_e = max(np.linalg.norm(Ef), 1e-300)
         maxiter = maxiter or 10_000
         for it in range(1, maxiter + 1):
             change = 0.0
-            for g, col, row in zip(groups, cols, rows):
-                new = Ef[g] + rho[g] * (row @ elem)
+            for i, (g, col, row) in enumerate(zip(groups, cols, rows)):
+                H = row @ elem
+                if clustered:
+                    H = H + urows[i] @ far
+                new = Ef[g] + rho[g] * H
                 delta = new - B[g]
                 B[g] = new
                 elem += col @ delta
+                if clustered:
+                    far += wcols[i] @ delta
                 change += float(np.sum(delta * delta))
             change = np.sqrt(change) / norm_e
             hist.append(change)
@@ -166,7 +188,10 @@ class LeafSystem:
 
     def explicit_K(self):
         """K as a dense (L, L) array: only for small reference solves."""
-        return np.asarray((self.M @ self.P_up).todense())
+        K = self.M @ self.P_up
+        if self.U is not None:
+            K = K + self.U @ self.W
+        return np.asarray(K.todense())
 
     def _shooting(self, E, tol, maxiter, method):
         """Progressive refinement (Southwell): shoot the leaf with most unshot power first."""

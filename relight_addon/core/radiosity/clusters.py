@@ -1,0 +1,224 @@
+"""Clusters of input patches, so that linking does not start from all pairs of patches.
+
+Without clusters, hierarchical radiosity starts from one link per pair of facing patches:
+O(P^2) links, which stops scenes with thousands of input faces.  Here a binary tree of patch
+clusters (median splits of the centroids along the longest axis) is linked from the root down;
+a pair of nodes that is well separated (radius sum < ``separation`` x distance) becomes one
+cluster link, and only nearby pairs of single patches become ordinary element links.
+
+A cluster link (X receives from Y, centres c_X, c_Y at distance d) transports light with a
+separable (rank-one) approximation of the point-to-point kernel cos cos' / (pi r^2):
+
+    H_l += V_XY d^2 / pi * cos(n_l, c_Y - x_l) / |c_Y - x_l|^2
+                        * sum_i A_i cos(n_i, c_X - y_i) / |y_i - c_X|^2 * B_i
+
+for every leaf l (centroid x_l) under X and every leaf i (centroid y_i) under Y, cosines clipped
+at zero, V_XY the visible fraction of rays between the clusters.  It is exact when either point
+sits at its cluster's centre, so its error is second order in radius / distance.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..geometry.sampling import area_uniform_uv, jacobian_coefficients
+from ..scene import bilinear_point
+from .hierarchy import Hierarchy
+
+
+@dataclass
+class ClusterTree:
+    order: np.ndarray      # patches in tree order: every node covers order[lo:hi]
+    lo: np.ndarray
+    hi: np.ndarray
+    child: np.ndarray      # (n, 2) children node ids, -1 for single-patch nodes
+    centre: np.ndarray     # (n, 3) centre of the bounding sphere of the node's corners
+    radius: np.ndarray
+
+    @property
+    def n(self):
+        return len(self.lo)
+
+    def is_patch(self, nodes):
+        return self.hi[nodes] - self.lo[nodes] == 1
+
+    def patch_of(self, nodes):
+        return self.order[self.lo[nodes]]
+
+
+def build_cluster_tree(corners: np.ndarray, patches: np.ndarray) -> ClusterTree:
+    """Binary tree over ``patches`` (ids into ``corners``), split at the median centroid."""
+    centroid = corners.mean(axis=1)
+    order = np.asarray(patches, np.int64).copy()
+    lo, hi, child = [0], [len(order)], [[-1, -1]]
+    stack = [0]
+    while stack:
+        node = stack.pop()
+        a, b = lo[node], hi[node]
+        if b - a <= 1:
+            continue
+        pts = centroid[order[a:b]]
+        axis = int(np.argmax(np.ptp(pts, axis=0)))
+        mid = (b - a) // 2
+        part = np.argpartition(pts[:, axis], mid)
+        order[a:b] = order[a:b][part]
+        kids = []
+        for ca, cb in ((a, a + mid), (a + mid, b)):
+            lo.append(ca)
+            hi.append(cb)
+            child.append([-1, -1])
+            kids.append(len(lo) - 1)
+            stack.append(len(lo) - 1)
+        child[node] = kids
+    lo, hi, child = np.array(lo), np.array(hi), np.array(child, np.int64)
+    # Bounding spheres: centre of the box of the node's corners, radius to its farthest corner.
+    n = len(lo)
+    box_lo = np.empty((n, 3))
+    box_hi = np.empty((n, 3))
+    for node in range(n - 1, -1, -1):             # children come after parents
+        if child[node, 0] < 0:
+            pc = corners[order[lo[node]]]
+            box_lo[node], box_hi[node] = pc.min(axis=0), pc.max(axis=0)
+        else:
+            c0, c1 = child[node]
+            box_lo[node] = np.minimum(box_lo[c0], box_lo[c1])
+            box_hi[node] = np.maximum(box_hi[c0], box_hi[c1])
+    centre = 0.5 * (box_lo + box_hi)
+    radius = 0.5 * np.linalg.norm(box_hi - box_lo, axis=1)
+    return ClusterTree(order, lo, hi, child, centre, radius)
+
+
+def link_clusters(tree: ClusterTree, separation: float, visibility=None, max_rounds: int = 200):
+    """Refine (root, root) into cluster links and nearby patch pairs.
+
+    ``visibility(X, Y)`` (optional) gives the visible fraction between node pairs: a
+    well-separated pair that is partly hidden is split further, since a cluster link carries
+    one visibility value for all its leaves.  Returns (cluster receivers, cluster sources,
+    cluster visibilities) and (patch receivers, patch sources) for pairs of single patches that
+    are not well separated or are partly hidden.
+    """
+    X = np.array([0])
+    Y = np.array([0])
+    cx, cy, cv, px, py = [], [], [], [], []
+    for _ in range(max_rounds):
+        if len(X) == 0:
+            break
+        same = X == Y
+        single_x, single_y = tree.is_patch(X), tree.is_patch(Y)
+        # Self pairs: the four child pairs (a single patch does not light itself).
+        sx = X[same & ~single_x]
+        c = tree.child[sx]
+        self_x = np.concatenate([c[:, 0], c[:, 1], c[:, 0], c[:, 1]])
+        self_y = np.concatenate([c[:, 0], c[:, 1], c[:, 1], c[:, 0]])
+        other = ~same
+        X, Y, single_x, single_y = X[other], Y[other], single_x[other], single_y[other]
+        dist = np.linalg.norm(tree.centre[X] - tree.centre[Y], axis=1)
+        apart = tree.radius[X] + tree.radius[Y] < separation * dist
+        both_patches = single_x & single_y
+        done_patch = both_patches
+        done_cluster = apart & ~both_patches
+        if visibility is not None and done_cluster.any():
+            idx = np.flatnonzero(done_cluster)
+            vis = visibility(X[idx], Y[idx])
+            partial = (vis > 0.0) & (vis < 1.0)
+            done_cluster[idx[partial]] = False
+            cv.append(vis[~partial])
+        else:
+            cv.append(np.ones(int(done_cluster.sum())))
+        px.append(tree.patch_of(X[done_patch]))
+        py.append(tree.patch_of(Y[done_patch]))
+        cx.append(X[done_cluster])
+        cy.append(Y[done_cluster])
+        split = ~(done_patch | done_cluster)
+        X, Y = X[split], Y[split]
+        # Split the larger node (a single patch cannot be split).
+        split_x = ~tree.is_patch(X) & ((tree.radius[X] >= tree.radius[Y]) | tree.is_patch(Y))
+        kx = tree.child[X[split_x]]
+        ky = tree.child[Y[~split_x]]
+        X = np.concatenate([self_x, kx[:, 0], kx[:, 1], X[~split_x], X[~split_x]])
+        Y = np.concatenate([self_y, Y[split_x], Y[split_x], ky[:, 0], ky[:, 1]])
+    return (np.concatenate(cx), np.concatenate(cy), np.concatenate(cv), np.concatenate(px),
+            np.concatenate(py))
+
+
+def cluster_visibility(tree: ClusterTree, h: Hierarchy, X, Y, occluder, rays: int, rng, scale):
+    """Visible fraction of ``rays`` segments between area-random points of clusters X and Y,
+    counting only point pairs that face each other."""
+    k = len(X)
+    if k == 0 or occluder is None or rays <= 0:
+        return np.ones(k)
+    n_patch = int(tree.order.max()) + 1
+    patch_area = h.area[:n_patch]
+    cum = np.concatenate([[0.0], np.cumsum(patch_area[tree.order])])
+    jac = jacobian_coefficients(h.corners[:n_patch])
+
+    def sample(nodes):
+        lo, hi = tree.lo[nodes], tree.hi[nodes]
+        t = cum[np.repeat(lo, rays)] + rng.random(len(nodes) * rays) * (
+            cum[np.repeat(hi, rays)] - cum[np.repeat(lo, rays)])
+        pos = np.clip(np.searchsorted(cum, t, side="right") - 1, np.repeat(lo, rays),
+                      np.repeat(hi, rays) - 1)
+        patch = tree.order[pos]
+        u, v = area_uniform_uv(None, rng.random((len(patch), 1)), rng.random((len(patch), 1)),
+                               tuple(j[patch] for j in jac))
+        return patch, bilinear_point(h.corners[patch], u[:, 0], v[:, 0])
+
+    pa, p = sample(X)
+    pb, q = sample(Y)
+    d = q - p
+    ok = (np.einsum("ij,ij->i", d, h.normal[pa]) > 0) & (np.einsum("ij,ij->i", d, h.normal[pb]) < 0)
+    eps = 1e-7 * scale
+    blocked = occluder.segments_occluded(p + eps * h.normal[pa], q + eps * h.normal[pb]) & ok
+    tried = np.bincount(np.repeat(np.arange(k), rays), ok, k)
+    free = np.bincount(np.repeat(np.arange(k), rays), ok & ~blocked, k)
+    return np.where(tried > 0, free / np.maximum(tried, 1), 1.0)
+
+
+def cluster_operator(tree: ClusterTree, h: Hierarchy, leaves: np.ndarray, X, Y, V):
+    """Sparse factors (U, W) of the cluster links' transport on the leaves: H += U @ (W @ B)."""
+    L = len(leaves)
+    k = len(X)
+    if k == 0:
+        return sp.csr_matrix((L, 0)), sp.csr_matrix((0, L))
+    # Leaves grouped by their patch's position in the tree order: each node's leaves are a range.
+    rank = np.empty(int(tree.order.max()) + 1, np.int64)
+    rank[tree.order] = np.arange(len(tree.order))
+    leaf_rank = rank[h.patch[leaves]]
+    by_rank = np.argsort(leaf_rank, kind="stable")
+    sorted_rank = leaf_rank[by_rank]
+
+    def leaves_under(nodes):
+        """Leaves under each node, grouped by node: (index pointer, link of each, leaf slots)."""
+        a = np.searchsorted(sorted_rank, tree.lo[nodes])
+        b = np.searchsorted(sorted_rank, tree.hi[nodes])
+        counts = b - a
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        link = np.repeat(np.arange(len(nodes)), counts)
+        pos = np.repeat(a - indptr[:-1], counts) + np.arange(int(indptr[-1]))
+        return indptr, link, by_rank[pos]
+
+    def weights(link, leaf, centre):
+        """cos(n_leaf, centre - x_leaf)+ / |centre - x_leaf|^2 per (link, leaf) entry."""
+        x = leaf_centroid[leaf]
+        n = leaf_normal[leaf]
+        c = centre[link]
+        dx, dy, dz = c[:, 0] - x[:, 0], c[:, 1] - x[:, 1], c[:, 2] - x[:, 2]
+        r2 = np.maximum(dx * dx + dy * dy + dz * dz, 1e-300)
+        cos = np.maximum(0.0, dx * n[:, 0] + dy * n[:, 1] + dz * n[:, 2]) / np.sqrt(r2)
+        return cos / r2
+
+    # Separable kernel: 1/|x - y|^2 ~ d^2 / (|x - c_Y|^2 |y - c_X|^2), exact when either point
+    # is at its cluster's centre, so the error is second order in radius / distance.
+    d2 = np.sum((tree.centre[Y] - tree.centre[X]) ** 2, axis=1)
+    leaf_centroid = h.centroid[leaves]
+    leaf_normal = h.normal[leaves]
+    # Entries come grouped by link, so both factors are built directly in compressed form.
+    ptr_r, link_r, leaf_r = leaves_under(X)
+    u = weights(link_r, leaf_r, tree.centre[Y]) * (d2 * V / np.pi)[link_r]
+    U = sp.csc_matrix((u, leaf_r, ptr_r), shape=(L, k))
+    ptr_s, link_s, leaf_s = leaves_under(Y)
+    w = weights(link_s, leaf_s, tree.centre[X]) * h.area[leaves][leaf_s]
+    W = sp.csr_matrix((w, leaf_s, ptr_s), shape=(k, L))
+    return U, W
