@@ -24,8 +24,9 @@ import numpy as np
 
 # Tolerance (in patch parameter units) for a texel centre lying exactly on a patch edge.
 INSIDE_TOLERANCE = 1e-9
-# Candidate (patch, texel) pairs processed at once; bounds peak memory to a few hundred MB.
-CHUNK_PAIRS = 1 << 18
+# Candidate (patch, texel) pairs processed at once (peak ~40 MB of temporaries); besides the
+# outputs, rasterisation keeps ~14 bytes per texel of state.
+CHUNK_PAIRS = 1 << 17
 # Parameter quantisation used to identify shared element corners (params are dyadic).
 _PARAM_QUANTUM = float(1 << 30)
 
@@ -156,57 +157,20 @@ def _cross(x, y):
     return x[..., 0] * y[..., 1] - x[..., 1] * y[..., 0]
 
 
-def inverse_bilinear(corners: np.ndarray, p: np.ndarray, newton: int = 1):
-    """Parameters (u, v) with ``bilinear(corners, u, v) == p`` for 2D quads.
+def inverse_bilinear(corners: np.ndarray, p: np.ndarray):
+    """Parameters (u, v) with ``bilinear_point(corners, u, v) == p`` for 2D quads.
 
-    corners (n, 4, 2), p (n, 2).  Closed form (quadratic in v, numerically stable roots; the
-    root closest to the unit square is kept, so either orientation works), then ``newton``
-    Newton steps to polish to machine precision.  Returns u, v and a ``valid`` mask (real root).
+    corners (n, 4, 2), p (n, 2).  Closed form (quadratic in v with numerically stable roots;
+    the root nearest the unit square is kept, so both orientations -- mirrored UV islands --
+    work; u by least squares over both coordinates, so rotations are safe), polished by one
+    Newton step to machine precision.  Returns u, v and ``valid`` (a real root exists).
+    Points outside the quad get parameters outside [0, 1].
     """
-    a, b, c, d = (corners[:, i, :] for i in range(4))
-    e = b - a
-    f = d - a
-    g = a - b + c - d
-    h = p - a
-    k2 = _cross(g, f)
-    k1 = _cross(e, f) + _cross(h, g)
-    k0 = _cross(h, e)
-    disc = k1 * k1 - 4.0 * k0 * k2
-    scale = np.maximum(np.abs(k1) * np.abs(k1), 1e-300)
-    valid = disc >= -1e-12 * scale
-    w = np.sqrt(np.maximum(disc, 0.0))
-    q = -0.5 * (k1 + np.where(k1 >= 0, w, -w))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v1 = np.where(q != 0, k0 / np.where(q != 0, q, 1.0), 0.0)   # the root that survives k2 -> 0
-        v2 = np.where(k2 != 0, q / np.where(k2 != 0, k2, 1.0), np.inf)
-    dist1 = np.abs(v1 - 0.5)
-    dist2 = np.where(np.isfinite(v2), np.abs(v2 - 0.5), np.inf)
-    v = np.where(dist2 < dist1, v2, v1)
-    v = np.where(np.isfinite(v), v, 0.0)
-    u = _solve_u(e, f, g, h, v)
-    for _ in range(newton):
-        u, v = _newton(a, e, f, g, p, u, v)
-    return u, v, valid
-
-
-def _solve_u(e, f, g, h, v):
-    """u from h = u (e + g v) + v f, least squares over both coordinates (rotation-safe)."""
-    den = e + g * v[:, None]
-    num = h - f * v[:, None]
-    dd = np.einsum("ij,ij->i", den, den)
-    return np.einsum("ij,ij->i", num, den) / np.maximum(dd, 1e-300)
-
-
-def _newton(a, e, f, g, p, u, v):
-    r = a + e * u[:, None] + f * v[:, None] + g * (u * v)[:, None] - p
-    ju = e + g * v[:, None]
-    jv = f + g * u[:, None]
-    det = _cross(ju, jv)
-    ok = np.abs(det) > 1e-300
-    sdet = np.where(ok, det, 1.0)
-    du = (r[:, 0] * jv[:, 1] - r[:, 1] * jv[:, 0]) / sdet
-    dv = (ju[:, 0] * r[:, 1] - ju[:, 1] * r[:, 0]) / sdet
-    return np.where(ok, u - du, u), np.where(ok, v - dv, v)
+    corners = np.asarray(corners, np.float64)
+    p = np.asarray(p, np.float64)
+    coef = _patch_coefficients(corners, np.zeros(len(corners), bool))
+    u, v, margin = _invert_quads(coef, np.arange(len(corners)), p[:, 0].copy(), p[:, 1].copy())
+    return u, v, np.isfinite(margin)
 
 
 def inverse_triangle(corners: np.ndarray, p: np.ndarray):
@@ -214,21 +178,12 @@ def inverse_triangle(corners: np.ndarray, p: np.ndarray):
 
     ``P(u, v) = (1-u)(1-v) a + u (1-v) b + v c`` so ``v = lambda_c`` and
     ``u = lambda_b / (1 - v)`` (``u = 1/2`` at the apex).  Also returns the smallest barycentric
-    coordinate (>= 0 inside).
+    coordinate (>= 0 inside, -inf for degenerate triangles).
     """
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    area2 = _cross(b - a, c - a)
-    sarea = np.where(area2 != 0, area2, 1.0)
-    lb = _cross(p - a, c - a) / sarea
-    lc = _cross(b - a, p - a) / sarea
-    la = 1.0 - lb - lc
-    v = lc
-    one_v = 1.0 - v
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(one_v > 1e-12, lb / np.where(one_v > 1e-12, one_v, 1.0), 0.5)
-    margin = np.minimum(np.minimum(la, lb), lc)
-    margin = np.where(area2 != 0, margin, -np.inf)
-    return u, v, margin
+    corners = np.asarray(corners, np.float64)
+    p = np.asarray(p, np.float64)
+    coef = _patch_coefficients(corners, np.ones(len(corners), bool))
+    return _invert_triangles(coef, np.arange(len(corners)), p[:, 0].copy(), p[:, 1].copy())
 
 
 def uv_patch_is_triangle(uv: np.ndarray) -> np.ndarray:
@@ -262,11 +217,14 @@ def rasterize_patches(uv, image_index, shapes, chunk_pairs: int = CHUNK_PAIRS) -
 
 def _rasterize_image(uv, ids, h, w, chunk_pairs) -> ImageTexels:
     n = h * w
-    best = np.full(n, -np.inf)
-    owner = np.full(n, -1, np.int64)
-    best_u = np.zeros(n)
-    best_v = np.zeros(n)
-    n_hits = np.zeros(n, np.int32)
+    # Per-texel running state kept small (~14 bytes a texel): the owner (local patch index) and
+    # its margin; (u, v) are recomputed for the final owners only.
+    owner = np.full(n, -1, np.int32 if len(ids) < 2**31 else np.int64)
+    best = np.full(n, -np.inf, np.float32)
+    n_hits = np.zeros(n, np.uint8)            # saturates at 255: only "> 1" is used
+    stamp = np.empty(n, np.int32 if chunk_pairs < 2**31 else np.int64)   # scratch, see below
+    dup = np.zeros(n, bool)
+    coef = None
     if len(ids):
         # Texel-space coordinates: the centre of texel x sits at X = x.
         pts = uv * np.array([w, h], np.float64) - 0.5
@@ -279,134 +237,190 @@ def _rasterize_image(uv, ids, h, w, chunk_pairs) -> ImageTexels:
         y1 = np.clip(np.floor(hi[:, 1] + eps), -1, h - 1).astype(np.int64)
         nx = np.maximum(x1 - x0 + 1, 0)
         ny = np.maximum(y1 - y0 + 1, 0)
-        count = nx * ny
         coef = _patch_coefficients(pts, uv_patch_is_triangle(uv))
-        live = np.flatnonzero(count > 0)
-        # Chunk boundaries over patches so that each chunk expands to <= chunk_pairs pairs
-        # (a single huge patch makes its own chunk).
-        csum = np.cumsum(count[live])
+        live = np.flatnonzero(nx * ny > 0)
+        # Boxes: split the texel box of big patches into bands of rows so that no box holds
+        # more than chunk_pairs texels (a patch spanning a whole 8k texture stays bounded).
+        rows = np.maximum(chunk_pairs // np.maximum(nx[live], 1), 1)
+        nsub = -(-ny[live] // rows)
+        bp = np.repeat(live, nsub)                                   # box -> patch
+        k = np.arange(len(bp)) - np.repeat(np.cumsum(nsub) - nsub, nsub)
+        brows = np.repeat(rows, nsub)
+        by0 = y0[bp] + k * brows
+        bny = np.minimum(brows, y1[bp] - by0 + 1)
+        bnx = nx[bp]
+        count = bnx * bny
+        # Chunks of consecutive boxes with <= chunk_pairs candidate pairs each.
+        csum = np.cumsum(count)
         starts = [0]
-        while starts[-1] < len(live):
+        while starts[-1] < len(bp):
             base = csum[starts[-1] - 1] if starts[-1] else 0
             end = int(np.searchsorted(csum, base + chunk_pairs, side="right"))
             starts.append(max(end, starts[-1] + 1))
         for s0, s1 in zip(starts[:-1], starts[1:]):
-            sel = live[s0:s1]
-            cnt = count[sel]
-            pid = np.repeat(sel, cnt)
+            cnt = count[s0:s1]
+            box = np.repeat(np.arange(s0, s1), cnt)
             first = np.cumsum(cnt) - cnt
             off = np.arange(int(cnt.sum()), dtype=np.int64) - np.repeat(first, cnt)
-            oy, ox = np.divmod(off, np.repeat(nx[sel], cnt))
+            oy, ox = np.divmod(off, bnx[box])
+            pid = bp[box]
             x = x0[pid] + ox
-            y = y0[pid] + oy
+            y = by0[box] + oy
+            del box, off, ox, oy
             u, v, margin = _invert(coef, pid, x.astype(np.float64), y.astype(np.float64))
             inside = margin >= -INSIDE_TOLERANCE
             if not inside.any():
                 continue
             texel = (y * w + x)[inside]
-            pid, u, v, margin = pid[inside], u[inside], v[inside], margin[inside]
-            n_hits += np.bincount(texel, weights=margin > INSIDE_TOLERANCE, minlength=n).astype(np.int32)
-            # Keep the best candidate per texel within the chunk, then merge with the running best.
+            pid, margin = pid[inside], margin[inside]
+            # Texels with a single candidate in this chunk (almost all of them) are merged
+            # directly; a scatter/gather stamp finds the others without sorting everything.
+            idx = np.arange(len(texel), dtype=stamp.dtype)
+            stamp[texel] = idx
+            clash = stamp[texel] != idx
+            if clash.any():
+                dup[texel[clash]] = True
+                multi = dup[texel]
+                dup[texel[clash]] = False
+                single = np.flatnonzero(~multi)
+                multi = np.flatnonzero(multi)
+            else:
+                single, multi = slice(None), None
+            ts, ms, ps = texel[single], margin[single], pid[single]
+            n_hits[ts] += ms > INSIDE_TOLERANCE
+            better = ms > best[ts]
+            best[ts[better]] = ms[better]
+            owner[ts[better]] = ps[better]
+            if multi is None:
+                continue
+            texel, margin, pid = texel[multi], margin[multi], pid[multi]
+            # Several candidates: best per texel (sorted by texel, then margin) ...
             order = np.lexsort((margin, texel))
             ts = texel[order]
             last = np.ones(len(ts), bool)
             last[:-1] = ts[1:] != ts[:-1]
-            pick = order[last]
-            t = texel[pick]
-            better = margin[pick] > best[t]
-            t = t[better]
+            # ... texels strictly inside several patches (overlapping UV islands) ...
+            strict = (margin[order] > INSIDE_TOLERANCE).astype(np.int64)
+            group_end = np.flatnonzero(last)
+            group_start = np.concatenate([[0], group_end[:-1] + 1])
+            hits = np.add.reduceat(strict, group_start)
+            ut = ts[group_end]
+            n_hits[ut] = np.minimum(n_hits[ut].astype(np.int64) + hits, 255).astype(np.uint8)
+            # ... merged with the running best over previous chunks.
+            pick = order[group_end]
+            better = margin[pick] > best[ut]
+            t = ut[better]
             pick = pick[better]
             best[t] = margin[pick]
-            owner[t] = ids[pid[pick]]
-            best_u[t] = u[pick]
-            best_v[t] = v[pick]
+            owner[t] = pid[pick]
     texel_index = np.flatnonzero(owner >= 0)
-    coverage = (owner >= 0).reshape(h, w)
+    local = owner[texel_index].astype(np.int64)
+    u = np.empty(len(texel_index))
+    v = np.empty(len(texel_index))
+    for c0 in range(0, len(texel_index), chunk_pairs):
+        sl = slice(c0, c0 + chunk_pairs)
+        y, x = np.divmod(texel_index[sl], w)
+        uu, vv, _ = _invert(coef, local[sl], x.astype(np.float64), y.astype(np.float64))
+        u[sl] = np.clip(uu, 0.0, 1.0)
+        v[sl] = np.clip(vv, 0.0, 1.0)
     return ImageTexels(
-        shape=(h, w), texel_index=texel_index, patch=owner[texel_index],
-        u=np.clip(best_u[texel_index], 0.0, 1.0), v=np.clip(best_v[texel_index], 0.0, 1.0),
-        coverage=coverage, n_overlap=int(np.count_nonzero(n_hits > 1)))
+        shape=(h, w), texel_index=texel_index, patch=np.asarray(ids, np.int64)[local],
+        u=u, v=v, coverage=(owner >= 0).reshape(h, w), n_overlap=int(np.count_nonzero(n_hits > 1)))
 
 
 def _patch_coefficients(pts, tri):
-    """Per-patch constants of the inverse maps (texel-space corners pts (m, 4, 2))."""
+    """Per-patch constants of the inverse maps (texel-space corners pts (m, 4, 2)).
+
+    Stored as separate contiguous 1D arrays: gathering rows of an (m, 2) array per candidate
+    is an order of magnitude slower than gathering from 1D arrays.
+    """
     a, b, c, d = (pts[:, i, :] for i in range(4))
     e = b - a
     f = d - a
     g = a - b + c - d
-    # Triangles: barycentric constants (c - a) and the doubled signed area.
     ca = c - a
-    area2 = _cross(e, ca)
-    return dict(a=a, e=e, f=f, g=g, k2=_cross(g, f), kef=_cross(e, f), ca=ca, area2=area2, tri=tri)
+    col = lambda x: np.ascontiguousarray(x)  # noqa: E731
+    return dict(ax=col(a[:, 0]), ay=col(a[:, 1]), ex=col(e[:, 0]), ey=col(e[:, 1]),
+                fx=col(f[:, 0]), fy=col(f[:, 1]), gx=col(g[:, 0]), gy=col(g[:, 1]),
+                k2=_cross(g, f), kef=_cross(e, f), cx=col(ca[:, 0]), cy=col(ca[:, 1]),
+                area2=_cross(e, ca), tri=np.asarray(tri, bool))
 
 
 def _invert(coef, pid, x, y):
     """Inverse map of candidates (patch pid, texel-space point (x, y)); margin >= 0 inside."""
+    tri = coef["tri"][pid]
+    n_tri = int(np.count_nonzero(tri))
+    if n_tri == 0:
+        return _invert_quads(coef, pid, x, y)
+    if n_tri == len(pid):
+        return _invert_triangles(coef, pid, x, y)
     u = np.empty(len(pid))
     v = np.empty(len(pid))
     margin = np.empty(len(pid))
-    tri = coef["tri"][pid]
-    all_quads = not tri.any()
-    qi = slice(None) if all_quads else np.flatnonzero(~tri)
-    if all_quads or len(qi):
-        pq = pid[qi]
-        px, py = x[qi], y[qi]
-        ax, ay = coef["a"][pq].T
-        ex, ey = coef["e"][pq].T
-        fx, fy = coef["f"][pq].T
-        gx, gy = coef["g"][pq].T
-        hx = px - ax
-        hy = py - ay
-        k2 = coef["k2"][pq]
-        k1 = coef["kef"][pq] + hx * gy - hy * gx
-        k0 = hx * ey - hy * ex
-        disc = k1 * k1 - 4.0 * k0 * k2
-        valid = disc >= -1e-12 * np.maximum(k1 * k1, 1e-300)
+    for sel, fn in ((np.flatnonzero(~tri), _invert_quads), (np.flatnonzero(tri), _invert_triangles)):
+        u[sel], v[sel], margin[sel] = fn(coef, pid[sel], x[sel], y[sel])
+    return u, v, margin
+
+
+def _invert_quads(coef, pid, x, y):
+    """Closed-form inverse bilinear map (stable quadratic roots, root nearest the unit square,
+    least-squares u), polished by one Newton step.  Margin: distance to the unit square's
+    boundary in parameter space (>= 0 inside), -inf where no real root exists."""
+    g = lambda name: coef[name][pid]  # noqa: E731
+    ex, ey, fx, fy, gx, gy = g("ex"), g("ey"), g("fx"), g("fy"), g("gx"), g("gy")
+    hx = x - g("ax")
+    hy = y - g("ay")
+    k2 = g("k2")
+    k1 = g("kef") + hx * gy - hy * gx
+    k0 = hx * ey - hy * ex
+    disc = k1 * k1 - 4.0 * k0 * k2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        valid = disc >= -1e-12 * (k1 * k1)
         w = np.sqrt(np.maximum(disc, 0.0))
         q = -0.5 * (k1 + np.copysign(w, k1))
-        qnz = q != 0
-        v1 = np.where(qnz, k0 / np.where(qnz, q, 1.0), 0.0)     # the root that survives k2 -> 0
-        knz = k2 != 0
-        v2 = np.where(knz, q / np.where(knz, k2, 1.0), np.inf)
-        vq = np.where(np.abs(v2 - 0.5) < np.abs(v1 - 0.5), v2, v1)
+        v = k0 / q                                    # the root that survives k2 -> 0
+        if np.any(k2 != 0):
+            v2 = q / k2
+            v = np.where(np.abs(v2 - 0.5) < np.abs(v - 0.5), v2, v)
         # u from h = u (e + g v) + v f, least squares over both coordinates (rotation-safe).
-        dx = ex + gx * vq
-        dy = ey + gy * vq
-        uq = ((hx - fx * vq) * dx + (hy - fy * vq) * dy) / np.maximum(dx * dx + dy * dy, 1e-300)
+        dx = ex + gx * v
+        dy = ey + gy * v
+        u = ((hx - fx * v) * dx + (hy - fy * v) * dy) / np.maximum(dx * dx + dy * dy, 1e-300)
         # One Newton step polishes the closed form to machine precision.
-        rx = ex * uq + fx * vq + gx * uq * vq - hx
-        ry = ey * uq + fy * vq + gy * uq * vq - hy
-        jux, juy = dx, dy
-        jvx = fx + gx * uq
-        jvy = fy + gy * uq
-        det = jux * jvy - juy * jvx
-        ok = np.abs(det) > 1e-300
-        sdet = np.where(ok, det, 1.0)
-        uq = np.where(ok, uq - (rx * jvy - ry * jvx) / sdet, uq)
-        vq = np.where(ok, vq - (jux * ry - juy * rx) / sdet, vq)
-        m = np.minimum(np.minimum(uq, 1.0 - uq), np.minimum(vq, 1.0 - vq))
-        u[qi], v[qi], margin[qi] = uq, vq, np.where(valid, m, -np.inf)
-    if not all_quads:
-        ti = np.flatnonzero(tri)
-        if len(ti):
-            pt = pid[ti]
-            ax, ay = coef["a"][pt].T
-            ex, ey = coef["e"][pt].T
-            cx, cy = coef["ca"][pt].T
-            area2 = coef["area2"][pt]
-            hx = x[ti] - ax
-            hy = y[ti] - ay
-            nz = area2 != 0
-            sarea = np.where(nz, area2, 1.0)
-            lb = (hx * cy - hy * cx) / sarea
-            lc = (ex * hy - ey * hx) / sarea
-            la = 1.0 - lb - lc
-            one_v = 1.0 - lc
-            big = one_v > 1e-12
-            u[ti] = np.where(big, lb / np.where(big, one_v, 1.0), 0.5)
-            v[ti] = lc
-            margin[ti] = np.where(nz, np.minimum(np.minimum(la, lb), lc), -np.inf)
+        rx = ex * u + fx * v + gx * (u * v) - hx
+        ry = ey * u + fy * v + gy * (u * v) - hy
+        jvx = fx + gx * u
+        jvy = fy + gy * u
+        det = dx * jvy - dy * jvx
+        ok = det != 0
+        sdet = det + ~ok
+        u = u - ok * ((rx * jvy - ry * jvx) / sdet)
+        v = v - ok * ((dx * ry - dy * rx) / sdet)
+        margin = np.minimum(np.minimum(u, 1.0 - u), np.minimum(v, 1.0 - v))
+    valid &= np.isfinite(margin)
+    margin[~valid] = -np.inf
     return u, v, margin
+
+
+def _invert_triangles(coef, pid, x, y):
+    """Duffy parameters of triangles from barycentric coordinates (see inverse_triangle);
+    margin: the smallest barycentric coordinate."""
+    area2 = coef["area2"][pid]
+    nz = area2 != 0
+    sarea = area2 + ~nz
+    hx = x - coef["ax"][pid]
+    hy = y - coef["ay"][pid]
+    cx, cy = coef["cx"][pid], coef["cy"][pid]
+    ex, ey = coef["ex"][pid], coef["ey"][pid]
+    lb = (hx * cy - hy * cx) / sarea
+    lc = (ex * hy - ey * hx) / sarea
+    la = 1.0 - lb - lc
+    one_v = 1.0 - lc
+    big = one_v > 1e-12
+    u = np.where(big, lb / np.where(big, one_v, 1.0), 0.5)
+    margin = np.minimum(np.minimum(la, lb), lc)
+    margin[~nz] = -np.inf
+    return u, lc, margin
 
 
 # ------------------------------------------------------------------------------------------
@@ -433,6 +447,8 @@ def element_means(values, element_ids, n_elements, hierarchy=None):
     values = np.asarray(values, np.float64)
     values2 = values.reshape(len(values), -1)
     element_ids = np.asarray(element_ids, np.int64)
+    if hierarchy is not None and n_elements != hierarchy.n:
+        raise ValueError("with a hierarchy, n_elements must be hierarchy.n")
     counts = np.bincount(element_ids, minlength=n_elements).astype(np.float64)
     sums = np.stack([np.bincount(element_ids, weights=values2[:, j], minlength=n_elements)
                      for j in range(values2.shape[1])], axis=-1)
@@ -597,6 +613,8 @@ def dilate_seams(image, coverage, pixels: int = 4):
     8-neighbours, ``pixels`` rings deep, so bilinear filtering / mip-mapping at UV seams does
     not pull in background.  Covered texels are never modified.
 
+    image (H, W) or (H, W, C); integer images are converted to float32.  Uses OpenCV's
+    ``filter2D`` when available (about 20x faster than the numpy fallback on 4k textures).
     Returns (new image, new coverage mask).
     """
     img = np.array(image, dtype=np.result_type(np.asarray(image).dtype, np.float32), copy=True)
@@ -604,26 +622,56 @@ def dilate_seams(image, coverage, pixels: int = 4):
     if squeeze:
         img = img[..., None]
     cov = np.asarray(coverage, bool).copy()
-    h, w = cov.shape
+    neighbour_sum = _neighbour_sum_cv2 if _cv2() is not None else _neighbour_sum_numpy
     for _ in range(int(pixels)):
         if cov.all() or not cov.any():
             break
-        val = np.where(cov[..., None], img, 0)
-        pv = np.pad(val, ((1, 1), (1, 1), (0, 0)))
-        pc = np.pad(cov.astype(np.float32), 1)
-        acc = np.zeros_like(img, dtype=np.float64)
-        cnt = np.zeros((h, w), np.float64)
-        for dy in (0, 1, 2):
-            for dx in (0, 1, 2):
-                if dy == 1 and dx == 1:
-                    continue
-                acc += pv[dy:dy + h, dx:dx + w]
-                cnt += pc[dy:dy + h, dx:dx + w]
-        new = ~cov & (cnt > 0)
+        covf = cov.astype(img.dtype)
+        cnt = neighbour_sum(covf[..., None])[..., 0]
+        new = ~cov & (cnt > 0.5)
         if not new.any():
             break
-        img[new] = (acc[new] / cnt[new][:, None]).astype(img.dtype)
-        cov = cov | new
+        acc = neighbour_sum(img * covf[..., None])
+        acc /= np.maximum(cnt, 1.0)[..., None]
+        np.copyto(img, acc, where=new[..., None])     # boolean fancy indexing is ~5x slower
+        cov |= new
     if squeeze:
         img = img[..., 0]
     return img, cov
+
+
+def _cv2():
+    try:
+        import cv2  # noqa: PLC0415
+    except ImportError:  # pragma: no cover - opencv is a declared dependency
+        return None
+    return cv2
+
+
+_KERNEL = np.ones((3, 3), np.float32)
+_KERNEL[1, 1] = 0.0
+
+
+def _neighbour_sum_cv2(a):
+    """Sum over the 8 neighbours (zero outside the image) of (H, W, C)."""
+    cv2 = _cv2()
+    if a.shape[2] <= 4:
+        a = np.ascontiguousarray(a)
+        return cv2.filter2D(a, -1, _KERNEL, borderType=cv2.BORDER_CONSTANT).reshape(a.shape)
+    out = np.empty_like(a)
+    for c0 in range(0, a.shape[2], 4):                 # filter2D handles up to 4 channels
+        part = np.ascontiguousarray(a[..., c0:c0 + 4])
+        res = cv2.filter2D(part, -1, _KERNEL, borderType=cv2.BORDER_CONSTANT)
+        out[..., c0:c0 + 4] = res.reshape(part.shape)
+    return out
+
+
+def _neighbour_sum_numpy(a):
+    h, w = a.shape[:2]
+    pv = np.pad(a, ((1, 1), (1, 1), (0, 0)))
+    acc = np.zeros_like(a)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            if dy != 1 or dx != 1:
+                acc += pv[dy:dy + h, dx:dx + w]
+    return acc
