@@ -2,9 +2,10 @@
 
 ``read_scene(context_or_scene, depsgraph=None, roles=None) -> (SceneData, ReadReport)``
 
-Geometry: every renderable mesh-like object (mesh, curve, surface, text, metaball) is evaluated
-(modifiers applied, ``evaluated_get`` + ``to_mesh`` / ``to_mesh_clear``), its world matrix is
-applied, triangles become ``(a, b, c, c)`` and quads ``(a, b, c, d)`` in Blender's loop order
+Geometry: every renderable mesh-like object (mesh, curve, surface, text, metaball) of the
+depsgraph, instances included (``depsgraph.object_instances``: collection, particle and
+geometry-nodes instances, labelled ``"<instancer>/<object>"``), is evaluated (modifiers applied,
+``to_mesh`` / ``to_mesh_clear``), its world matrix is applied, triangles become ``(a, b, c, c)`` and quads ``(a, b, c, d)`` in Blender's loop order
 (counter-clockwise around the face normal), n-gons are split with ``mesh.loop_triangles``.
 SceneData itself splits non-planar quads and drops zero-area faces (counted in the report).
 Everything is gathered with ``foreach_get`` into float32/int32 buffers and numpy, never with
@@ -30,10 +31,14 @@ repeated by ``tests/test_bridge_read.py``):
   (measured 3.1398 / pi = 0.9994).  Cycles mesh emission is two-sided; here a face emits from its
   front side only (documented limitation).
 
+The depsgraph defaults to the context's (viewport) one, so modifiers use their viewport levels;
+pass ``depsgraph=`` a render-mode depsgraph to read render levels.
+
 Roles (object custom property ``relight_role`` or the ``roles`` argument, name -> role):
 ``"relit"`` (default for renderable mesh objects), ``"occluder"`` (patches with reflectance 0
 and no emission that only block rays and take no part in the display), ``"ignored"`` (not read).
-Objects hidden from rendering are ignored.
+An instancer's role, when set, applies to its instances.  Objects hidden from rendering
+(``hide_render``, on the object or its instancer) are ignored.
 
 Nothing in the user's data is modified: evaluated meshes are freed with ``to_mesh_clear``, no
 selection, mode, or datablock changes.
@@ -42,9 +47,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import bpy
 import numpy as np
 
 from ..core.scene import SceneData
+
+# Material.use_nodes is deprecated (always on) from Blender 5.0.
+_LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
 ROLES = ("relit", "occluder", "ignored")
 ROLE_PROPERTY = "relight_role"
@@ -198,7 +207,9 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
     if mat is None:
         return _MaterialInfo(np.full(3, DEFAULT_RHO), black)
     name = mat.name
-    tree = mat.node_tree if getattr(mat, "use_nodes", True) else None
+    tree = mat.node_tree
+    if tree is not None and _LEGACY_USE_NODES and not mat.use_nodes:
+        tree = None  # Blender < 5: node tree present but switched off
     if tree is None:
         return _MaterialInfo(_rgb(mat.diffuse_color), black)
     shader = _output_surface_node(tree)
@@ -236,7 +247,7 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
         if colour_sock.is_linked:
             report.warn(f"Material '{name}': base colour comes from nodes that are not read; "
                         "its default value is used")
-        elif wants_texture:
+        elif wants_texture and not np.any(emission > 0):
             report.warn(f"No image texture on material '{name}' (base colour used)")
         return info
     if not direct:
@@ -375,11 +386,8 @@ def _role(obj, roles):
 
 def read_scene(context_or_scene, depsgraph=None, roles=None):
     """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene."""
-    import bpy  # noqa: F401  (the bridge is the only place bpy is used)
-
     if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
         scene = context_or_scene.scene
-        view_layer = context_or_scene.view_layer
         if depsgraph is None:
             depsgraph = context_or_scene.evaluated_depsgraph_get()
     else:
@@ -394,33 +402,44 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
     lamp_names: list = []
     emissive_lamp: dict = {}     # (object, material) -> lamp index
 
-    for obj in view_layer.objects:
+    labels_seen: dict = {}
+    # depsgraph.object_instances: every evaluated object of the view layer plus the instances
+    # (collection instances, geometry-nodes and particle instances) with their world matrices.
+    for inst in depsgraph.object_instances:
+        ev = inst.object
+        obj = ev.original
         if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
             continue
-        role = _role(obj, roles)
+        parent = inst.parent.original if inst.is_instance and inst.parent is not None else None
+        label = obj.name if parent is None else f"{parent.name}/{obj.name}"
+        if label in labels_seen:
+            labels_seen[label] += 1
+            label = f"{label}.{labels_seen[label]}"
+        else:
+            labels_seen[label] = 0
+        role_of = parent if parent is not None and (
+            (roles and parent.name in roles) or ROLE_PROPERTY in parent) else obj
+        role = _role(role_of, roles)
         if role is None:
-            report.warn(f"Object '{obj.name}': unknown {ROLE_PROPERTY} '{obj.get(ROLE_PROPERTY)}', "
-                        "read as relit")
+            report.warn(f"Object '{role_of.name}': unknown {ROLE_PROPERTY} "
+                        f"'{role_of.get(ROLE_PROPERTY)}', read as relit")
             role = "relit"
-        if obj.hide_render:
-            report.ignored_objects.append(obj.name)
+        if obj.hide_render or (parent is not None and parent.hide_render) or role == "ignored":
+            report.ignored_objects.append(label)
             continue
-        if role == "ignored":
-            report.ignored_objects.append(obj.name)
-            continue
-        ev = obj.evaluated_get(depsgraph)
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             light = ev.data
             if light.type != "AREA" or light.shape not in AREA_SHAPES:
-                report.warn(f"Light '{obj.name}' ({light.type.lower()}) is not supported yet and "
+                report.warn(f"Light '{label}' ({light.type.lower()}) is not supported yet and "
                             "is ignored: use an area light or an emissive face")
                 continue
             if float(getattr(light, "spread", np.pi)) < np.pi - 1e-6:
-                report.warn(f"Light '{obj.name}': spread below 180 degrees is treated as a "
+                report.warn(f"Light '{label}': spread below 180 degrees is treated as a "
                             "Lambertian (180 degree) emitter")
             if getattr(light, "use_nodes", False) and light.node_tree is not None:
-                report.warn(f"Light '{obj.name}': light nodes are ignored")
-            m = np.array(ev.matrix_world, dtype=np.float64)
+                report.warn(f"Light '{label}': light nodes are ignored")
+            m = matrix
             local = _area_light_polygon(light)
             if np.linalg.det(m[:3, :3]) < 0:
                 local = local[:, ::-1]
@@ -428,14 +447,14 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
             area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
             if not area > 0:
-                report.warn(f"Light '{obj.name}' has zero area and is ignored")
+                report.warn(f"Light '{label}' has zero area and is ignored")
                 continue
             exitance = area_light_exitance(light, area)
             if not np.any(exitance > 0):
-                report.warn(f"Light '{obj.name}' has no power and is ignored")
+                report.warn(f"Light '{label}' has no power and is ignored")
                 continue
             k = len(lamp_names)
-            lamp_names.append(obj.name)
+            lamp_names.append(label)
             q = len(quads)
             corners.append(quads)
             rho.append(np.zeros((q, 3)))
@@ -443,7 +462,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             lamp.append(np.full(q, k))
             occluder.append(np.zeros(q, bool))
             group.append(np.full(q, len(report.groups)))
-            report.groups.append((obj.name, ""))
+            report.groups.append((label, ""))
             uvs.append(np.zeros((q, 4, 2)))
             image_idx.append(np.full(q, -1))
             report.lamps += 1
@@ -463,10 +482,10 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             if n_v == 0 or len(me.polygons) == 0:
                 continue
             report.objects += 1
-            co = _transform(ev.matrix_world, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
+            co = _transform(matrix, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
             loop_vert = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
             loops, poly = _mesh_faces(me, report)
-            if np.linalg.det(np.array(ev.matrix_world)[:3, :3]) < 0:
+            if np.linalg.det(matrix[:3, :3]) < 0:
                 loops = loops[:, [0, 3, 2, 1]]  # mirrored: keep the winding (a, b, c, c) -> (a, c, c, b)
                 tri = loops[:, 1] == loops[:, 2]
                 loops[tri] = loops[tri][:, [0, 2, 3, 3]]
@@ -491,15 +510,15 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                     mat_cache[mkey] = _material_info(mat, report, images, role == "relit")
                 info = mat_cache[mkey]
                 obj_group[sel] = len(report.groups)
-                report.groups.append((obj.name, mat.name if mat is not None else ""))
+                report.groups.append((label, mat.name if mat is not None else ""))
                 if role == "occluder":
                     continue
                 obj_rho[sel] = np.clip(info.rho, 0.0, RHO_MAX)
                 if np.any(info.emission_radiance > 0):
-                    key = (obj.name, mkey)
+                    key = (label, mkey)
                     if key not in emissive_lamp:
                         emissive_lamp[key] = len(lamp_names)
-                        lamp_names.append(f"{obj.name}/{mkey}")
+                        lamp_names.append(f"{label}/{mkey}")
                         report.lamps += 1
                     obj_lamp[sel] = emissive_lamp[key]
                     obj_em[sel] = np.pi * info.emission_radiance
@@ -507,11 +526,11 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                 layer = _uv_layer(me, info.uv_map)
                 if layer is None:
                     if info.image_node is not None:
-                        report.warn(f"No UV map on object '{obj.name}': image '{info.image_node}' "
+                        report.warn(f"No UV map on object '{label}': image '{info.image_node}' "
                                     "cannot be mapped (its mean colour is used)")
                     continue
                 if info.uv_map and layer.name != info.uv_map:
-                    report.warn(f"Object '{obj.name}' has no UV map '{info.uv_map}' used by "
+                    report.warn(f"Object '{label}' has no UV map '{info.uv_map}' used by "
                                 f"material '{mkey}': '{layer.name}' is read instead")
                 if layer.name not in uv_cache:
                     uv_cache[layer.name] = _uv_array(layer, n_loops)
