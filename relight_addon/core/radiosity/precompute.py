@@ -227,7 +227,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         reflected = b_leaf[e_max[system.patch] == 0]
         spread = np.maximum(_spread_over_leaves(h, system, b_leaf),
                             _spread_within(h, links, b_elem, rho_max))
-        return b_elem, spread, float(reflected.max()) if len(reflected) else float(e_max.max())
+        b_scale = float(reflected.max()) if len(reflected) else float(e_max.max())
+        return b_elem, spread, max(b_scale, 1e-300)
 
     # Start from the patch-to-patch links and a first solution on them.
     with timer("refine"):
@@ -237,7 +238,6 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                    spread)
     with timer("solve"):
         b_est, b_var, b_scale = estimate_radiosity(kept)
-    b_scale = max(b_scale, 1e-300)
     fresh_r = fresh_s = np.zeros(0, np.int64)
     for pass_no in range(q.passes):
         report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
@@ -254,8 +254,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             if pending.n == 0:
                 break
             with timer("refine"):
-                split_r, split_s = _oracle(h, pending, b_est, b_var, b_scale, rho_max, q,
-                                           q.min_area * total_area)
+                split_r, split_s = _oracle(h, pending, b_est, b_var, b_scale, rho_max, q, min_area)
                 kept_parts.append(pending.take(~(split_r | split_s)))
                 if not (split_r.any() or split_s.any()):
                     fresh_r = fresh_s = np.zeros(0, np.int64)
@@ -279,7 +278,6 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             break
         with timer("solve"):
             b_est, b_var, b_scale = estimate_radiosity(kept)
-        b_scale = max(b_scale, 1e-300)
 
     report(0.7, f"Form factors and visibility for {kept.n} links")
     with timer("final_links"):
