@@ -4,8 +4,8 @@ Uses Blender's own extension CLI from the bpy wheel (tools/blender_ext.py finds 
 the zip into a throw-away user folder (BLENDER_USER_RESOURCES) in a fresh interpreter, so the
 developer's own Blender configuration is never touched.
 
-The zip is dist/relight-<version>-linux_x64.zip when `make extension` has built it (then the
-bundled wheels are checked too); otherwise a zip without wheels is built into a temp dir.
+The zip is dist/relight-<version>-linux_x64.zip when `make extension` has built it; otherwise
+the same linux-x64 zip, with its bundled wheels, is built into a temp dir.
 """
 
 from __future__ import annotations
@@ -52,20 +52,30 @@ def _run(cmd, **kwargs):
     return subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kwargs)
 
 
-def _build_zip_without_wheels(tmp_dir: str) -> str:
-    """Build the extension from a copy of the tree whose manifest lists no wheels."""
+def _build_linux_zip(tmp_dir: str) -> str:
+    """Build the linux-x64 zip as `make extension` does, from a copy of the tree: download the
+    linux-x64 wheels (pip's cache makes repeated runs cheap), list them, build split zips."""
     src = os.path.join(tmp_dir, "src")
     shutil.copytree(ROOT, src, ignore=_COPY_IGNORE)
+    wheels_dir = os.path.join(src, "wheels")
+    proc = _run([sys.executable, os.path.join(ROOT, "tools", "fetch_wheels.py"),
+                 "--platform", "linux-x64", "--dest", wheels_dir])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
     sys.path.insert(0, os.path.join(ROOT, "tools"))
     try:
         import sync_wheels
     finally:
         sys.path.pop(0)
-    sync_wheels.sync(os.path.join(src, "blender_manifest.toml"), [])
-    out = os.path.join(tmp_dir, f"{ADDON_ID}.zip")
-    proc = _run([*BLENDER_EXT, "build", "--source-dir", src, "--output-filepath", out])
+    sync_wheels.sync(os.path.join(src, "blender_manifest.toml"),
+                     [w for w in os.listdir(wheels_dir) if w.endswith(".whl")])
+    out = os.path.join(tmp_dir, "dist")
+    os.makedirs(out)
+    proc = _run([*BLENDER_EXT, "build", "--source-dir", src, "--output-dir", out,
+                 "--split-platforms"])
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
+    zips = [z for z in os.listdir(out) if z.endswith("linux_x64.zip")]
+    assert len(zips) == 1, os.listdir(out)
+    return os.path.join(out, zips[0])
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +83,7 @@ def extension_zip(tmp_path_factory) -> str:
     built = os.path.join(ROOT, "dist", f"{ADDON_ID}-{MANIFEST['version']}-linux_x64.zip")
     if os.path.exists(built):
         return built
-    return _build_zip_without_wheels(str(tmp_path_factory.mktemp("build")))
+    return _build_linux_zip(str(tmp_path_factory.mktemp("build")))
 
 
 def test_manifest_validates():
