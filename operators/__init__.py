@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies
+from . import dependencies, precompute
 
-_modules = (dependencies,)
+_modules = (dependencies, precompute)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 

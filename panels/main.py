@@ -31,6 +31,11 @@ class RELIGHT_PT_main(bpy.types.Panel):
         layout = self.layout
         layout.label(text=f"Relight {addon_version()}", icon='LIGHT')
         layout.operator("relight.check_dependencies", icon='CHECKMARK')
+        # A menu of the quality presets: picking one starts the (modal) precompute.
+        layout.operator_menu_enum("relight.precompute", "preset", text="Precompute", icon='LIGHT_AREA')
+        row = layout.row(align=True)
+        row.operator("relight.restore_originals", icon='LOOP_BACK')
+        row.operator("relight.clear", icon='TRASH')
 
 
 classes = (RELIGHT_PT_main,)

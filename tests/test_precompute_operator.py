@@ -1,0 +1,429 @@
+"""relight.precompute / restore_originals / clear with Blender as a Python module.
+
+Mode "texture correction off" (DRB97 baseline): D = sum_k B_k, M_k = B_k / D, relit material
+T * sum_k I_k M_k, I_k a driver ``p / P0`` on the light's energy.
+
+How the add-on is registered here: the repository root *is* the extension package (its
+``__init__.py`` uses relative imports), so it is loaded with ``importlib`` under the package
+name ``relight_ext`` from its own path (``spec_from_file_location`` with
+``submodule_search_locations``), whatever the checkout folder is called, then ``register()``ed.
+``bpy.ops.wm.read_factory_settings`` does not unregister Python classes, so registering once
+per session is enough.
+
+Scene (built in code, factory-empty): a closed 4 x 4 x 3 m room of six inward-facing planes,
+each with its own material (UV Map node -> 16 x 16 Image Texture -> Principled base colour),
+a 0.8 m box on the floor (one material, one image), two 0.5 m area lights under the ceiling.
+"""
+import importlib.util
+import os
+import sys
+import tempfile
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PKG = "relight_ext"
+TEX = 16
+LAMPS = {"LampA": ((-1.0, 0.0, 2.9), 60.0), "LampB": ((1.0, 0.5, 2.9), 30.0)}
+
+
+def _addon():
+    if PKG in sys.modules:
+        return sys.modules[PKG]
+    spec = importlib.util.spec_from_file_location(
+        PKG, os.path.join(ROOT, "__init__.py"), submodule_search_locations=[ROOT])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[PKG] = module
+    spec.loader.exec_module(module)
+    module.register()
+    return module
+
+
+def _write():
+    _addon()
+    return importlib.import_module(PKG + ".relight_addon.blender.write")
+
+
+# -- scene ---------------------------------------------------------------------------------
+
+def _image(name, seed):
+    img = bpy.data.images.new(name, TEX, TEX)
+    rng = np.random.default_rng(seed)
+    px = np.ones((TEX, TEX, 4), np.float32)
+    px[..., :3] = 0.3 + 0.6 * rng.random((TEX, TEX, 3))
+    img.pixels.foreach_set(px.reshape(-1))
+    return img
+
+
+def _material(name, seed):
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    bsdf = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = _image(name + "_img", seed)
+    uvn = nt.nodes.new("ShaderNodeUVMap")
+    uvn.uv_map = "UVMap"
+    nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat
+
+
+def _mesh_object(name, verts, faces, mat):
+    """Faces get non-overlapping UV cells: one face -> the unit square, more -> a 3 x 2 atlas."""
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(v) for v in verts], [], [tuple(f) for f in faces])
+    uv = me.uv_layers.new(name="UVMap")
+    square = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
+    for i, poly in enumerate(me.polygons):
+        cell = square if len(faces) == 1 else (square + (i % 3, i // 3)) / (3, 2)
+        for j, li in enumerate(poly.loop_indices):
+            uv.data[li].uv = tuple(cell[j % 4])
+    me.materials.append(mat)
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _quad(c, n, half):
+    """Corners of a square centred at c with normal n (counter-clockwise around n)."""
+    c, n = np.asarray(c, float), np.asarray(n, float)
+    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    return [c - half[0] * u - half[1] * v, c + half[0] * u - half[1] * v,
+            c + half[0] * u + half[1] * v, c - half[0] * u + half[1] * v]
+
+
+def build_scene(lamps=True):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    walls = {  # name: (centre, inward normal, half sizes)
+        "Floor": ((0, 0, 0), (0, 0, 1), (2, 2)), "Ceiling": ((0, 0, 3), (0, 0, -1), (2, 2)),
+        "WallXn": ((-2, 0, 1.5), (1, 0, 0), (1.5, 2)), "WallXp": ((2, 0, 1.5), (-1, 0, 0), (1.5, 2)),
+        "WallYn": ((0, -2, 1.5), (0, 1, 0), (2, 1.5)), "WallYp": ((0, 2, 1.5), (0, -1, 0), (2, 1.5)),
+    }
+    for i, (name, (c, n, half)) in enumerate(walls.items()):
+        # _quad's u is n x a: swap the half sizes if the square is not square-ish; all fit.
+        verts = _quad(c, n, (max(half), max(half)) if half[0] == half[1] else half)
+        _mesh_object(name, verts, [(0, 1, 2, 3)], _material(name + "_mat", i))
+    # Box 0.8 m on the floor, outward normals.
+    x0, y0, s = 0.3, 0.2, 0.8
+    v = [(x0 + dx * s, y0 + dy * s, dz * s) for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)]
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    _mesh_object("Box", v, faces, _material("Box_mat", 10))
+    if lamps:
+        for name, (loc, power) in LAMPS.items():
+            light = bpy.data.lights.new(name, "AREA")
+            light.energy = power
+            light.size = 0.5
+            obj = bpy.data.objects.new(name, light)
+            obj.location = loc
+            bpy.context.scene.collection.objects.link(obj)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0, -1.5, 1.5)
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    bpy.context.view_layer.update()
+
+
+def _pixels(img):
+    buf = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(buf)
+    return buf.reshape(img.size[1], img.size[0], -1)
+
+
+def _snapshot():
+    """Original images' pixels and the node/link structure of every material."""
+    imgs = {im.name: _pixels(im).copy() for im in bpy.data.images}
+    mats = {}
+    for m in bpy.data.materials:
+        nt = m.node_tree
+        mats[m.name] = (sorted((n.name, n.bl_idname) for n in nt.nodes),
+                        sorted((l.from_node.name, l.from_socket.identifier, l.to_node.name,
+                                l.to_socket.identifier) for l in nt.links))
+    slots = {o.name: [s.material.name if s.material else "" for s in o.material_slots]
+             for o in bpy.data.objects}
+    return imgs, mats, slots
+
+
+def _value_node(mat, lamp):
+    return mat.node_tree.nodes[f"I {lamp}"]
+
+
+def _m_images(mat):
+    return {n.name[2:]: n.image for n in mat.node_tree.nodes
+            if n.bl_idname == "ShaderNodeTexImage" and n.name.startswith("M ")}
+
+
+@pytest.fixture(scope="module")
+def precomputed():
+    """One precompute shared by the read-only checks (the solve is the slow part)."""
+    _addon()
+    build_scene()
+    before = _snapshot()
+    counts = (len(bpy.data.images), len(bpy.data.materials))
+    result = bpy.ops.relight.precompute(preset="draft")
+    return result, before, counts
+
+
+# -- tests ---------------------------------------------------------------------------------
+
+def test_precompute_finishes_and_writes(precomputed):
+    result, (imgs0, mats0, slots0), (n_img, n_mat) = precomputed
+    assert result == {"FINISHED"}
+    gen = [im for im in bpy.data.images if im.get("relight_generated")]
+    # 7 images (6 walls + box) x 2 lamps
+    assert len(gen) == 7 * len(LAMPS)
+    assert len(bpy.data.images) == n_img + len(gen)
+    for im in gen:
+        assert im.packed_file is not None, im.name
+        assert im.is_float and im.users >= 1, im.name
+        assert im.size[0] == TEX and im.size[1] == TEX
+        assert im.colorspace_settings.name == "Non-Color"
+        data = bytes(im.packed_file.data)
+        assert data[:4] == b"v/1\x01"                       # OpenEXR
+        at = data.find(b"channels\x00chlist\x00") + len(b"channels\x00chlist\x00") + 4
+        names_types = []
+        while data[at] != 0:                                 # chlist: name\0, int32 pixel type, ...
+            end = data.index(b"\x00", at)
+            names_types.append((data[at:end], int.from_bytes(data[end + 1:end + 5], "little")))
+            at = end + 1 + 16
+        assert names_types and all(t == 1 for _, t in names_types), names_types   # 1 = HALF
+        px = _pixels(im)
+        assert np.isfinite(px).all(), im.name
+    names = {im.name for im in gen}
+    assert "Floor_mat_img.relight.LampA" in names and "Box_mat_img.relight.LampB" in names
+    relit = [m for m in bpy.data.materials if m.get("relight_generated")]
+    assert len(relit) == 7 and len(bpy.data.materials) == n_mat + 7
+
+
+def test_originals_untouched(precomputed):
+    _, (imgs0, mats0, slots0), _ = precomputed
+    for name, px in imgs0.items():
+        assert name in bpy.data.images
+        np.testing.assert_array_equal(_pixels(bpy.data.images[name]), px)
+    now = _snapshot()[1]
+    for name, structure in mats0.items():
+        assert name in bpy.data.materials
+        assert now[name] == structure, name
+
+
+def test_relit_material_assigned(precomputed):
+    for name in ("Floor", "Ceiling", "WallXn", "WallXp", "WallYn", "WallYp", "Box"):
+        obj = bpy.data.objects[name]
+        mat = obj.material_slots[0].material
+        assert mat.name == f"{name}_mat.relight"
+        assert list(obj["relight_original_materials"]) == [f"{name}_mat"]
+        nt = mat.node_tree
+        out = [n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        assert len(out) == 1 and out[0].inputs["Surface"].links[0].from_node.bl_idname == "ShaderNodeEmission"
+        # T is the original image, fed by the same UV Map node as the original
+        tex = [n for n in nt.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image.name == f"{name}_mat_img"]
+        assert len(tex) == 1
+        src = tex[0].inputs["Vector"].links[0].from_node
+        assert src.bl_idname == "ShaderNodeUVMap" and src.uv_map == "UVMap"
+        for m_node in _m_images(mat):
+            node = nt.nodes["M " + m_node]
+            assert node.inputs["Vector"].links[0].from_node == src
+
+
+def test_maps_sum_to_one_and_drivers_are_one(precomputed):
+    bpy.context.view_layer.update()
+    n_lit = n_all = 0
+    for mat in [m for m in bpy.data.materials if m.get("relight_generated")]:
+        maps = _m_images(mat)
+        assert set(maps) == set(LAMPS)
+        total = sum(_pixels(im)[..., :3].astype(np.float64) for im in maps.values())
+        # Every texel centre of the unit-square UVs is covered: sum is 1 where lit, 0 where D
+        # fell under the floor (the box's bottom face touching the floor can be unlit).
+        # Written maps are half floats (spacing 2**-11 below 1): the exact 1e-5 check is on
+        # display_maps() in test_worker_job_and_display_maps.
+        lit = np.abs(total - 1) < 2e-3
+        unlit = total == 0
+        assert np.all(lit | unlit), mat.name
+        n_lit += lit.sum()
+        n_all += lit.size
+        for lamp in LAMPS:
+            node = _value_node(mat, lamp)
+            assert abs(node.outputs[0].default_value - 1.0) < 1e-6
+            fc = mat.node_tree.animation_data.drivers.find(f'nodes["I {lamp}"].outputs[0].default_value')
+            assert fc is not None and fc.driver.type == "SCRIPTED"
+            assert fc.driver.is_simple_expression, fc.driver.expression
+            assert fc.driver.is_valid
+            assert fc.driver.expression == f"p / {LAMPS[lamp][1]!r}"
+    assert n_lit > 0.9 * n_all
+    for lamp, (_, power) in LAMPS.items():
+        assert bpy.data.lights[lamp]["relight_power0"] == power
+
+
+def test_driver_follows_light_power(precomputed):
+    mat = bpy.data.materials["Floor_mat.relight"]
+    light = bpy.data.lights["LampA"]
+    try:
+        light.energy = 90.0
+        bpy.context.view_layer.update()
+        assert abs(_value_node(mat, "LampA").outputs[0].default_value - 1.5) < 1e-6
+        assert abs(_value_node(mat, "LampB").outputs[0].default_value - 1.0) < 1e-6
+        light.energy = 0.0
+        bpy.context.scene.frame_set(2)
+        assert _value_node(mat, "LampA").outputs[0].default_value == 0.0
+    finally:
+        light.energy = LAMPS["LampA"][1]
+        bpy.context.scene.frame_set(1)
+    assert abs(_value_node(mat, "LampA").outputs[0].default_value - 1.0) < 1e-6
+
+
+def test_lamp_maps_differ(precomputed):
+    """Sanity: the two lamps light the room differently (the maps are not a constant split)."""
+    a = _pixels(bpy.data.images["Floor_mat_img.relight.LampA"])[..., 0]
+    assert a.max() - a.min() > 0.05
+
+
+def test_save_reload_keeps_packed_pixels(precomputed):
+    before = {im.name: _pixels(im).copy() for im in bpy.data.images if im.get("relight_generated")}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "relit.blend")
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+        bpy.ops.wm.open_mainfile(filepath=path)
+    for name, px in before.items():
+        im = bpy.data.images[name]
+        assert im.packed_file is not None
+        np.testing.assert_allclose(_pixels(im), px, atol=2e-3)   # half float
+    mat = bpy.data.materials["Floor_mat.relight"]
+    assert bpy.data.objects["Floor"].material_slots[0].material == mat
+
+
+def test_restore_clear_and_rerun_do_not_leak():
+    _addon()
+    build_scene()
+    imgs0, mats0, slots0 = _snapshot()
+    counts0 = (len(bpy.data.images), len(bpy.data.materials))
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    counts1 = (len(bpy.data.images), len(bpy.data.materials))
+    # Second run replaces the first: same datablock counts, relit materials still assigned.
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts1
+    assert bpy.data.objects["Box"].material_slots[0].material.name == "Box_mat.relight"
+    assert not [m for m in bpy.data.materials if m.name.endswith(".relight.001")]
+    # Restore puts the originals back.
+    assert bpy.ops.relight.restore_originals() == {"FINISHED"}
+    assert _snapshot()[2] == slots0
+    assert "relight_original_materials" not in bpy.data.objects["Box"]
+    # Clear removes every generated datablock and property.
+    assert bpy.ops.relight.clear() == {"FINISHED"}
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
+    assert all("relight_power0" not in l for l in bpy.data.lights)
+    imgs, mats, slots = _snapshot()
+    assert mats == mats0 and slots == slots0 and set(imgs) == set(imgs0)
+
+
+def test_clear_while_assigned_restores_first():
+    _addon()
+    build_scene()
+    slots0 = _snapshot()[2]
+    counts0 = (len(bpy.data.images), len(bpy.data.materials))
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    assert bpy.ops.relight.clear() == {"FINISHED"}
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
+    assert _snapshot()[2] == slots0
+
+
+def test_no_lamps_is_cancelled_without_changes():
+    _addon()
+    build_scene(lamps=False)
+    imgs0, mats0, slots0 = _snapshot()
+    counts0 = (len(bpy.data.images), len(bpy.data.materials))
+    with pytest.raises(RuntimeError, match="no lamps"):
+        # bpy.ops raises RuntimeError carrying the operator's ERROR report
+        bpy.ops.relight.precompute(preset="draft")
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
+    imgs, mats, slots = _snapshot()
+    assert (mats, slots) == (mats0, slots0) and set(imgs) == set(imgs0)
+    for name, px in imgs0.items():
+        np.testing.assert_array_equal(imgs[name], px)
+
+
+def test_worker_job_and_display_maps():
+    """The modal path's worker: a cancel raised from the progress callback stops the solve."""
+    _addon()
+    build_scene()
+    op = importlib.import_module(PKG + ".operators.precompute")
+    counts0 = (len(bpy.data.images), len(bpy.data.materials))
+    data, report, error = op.read_for_precompute(bpy.context)
+    assert error is None
+    job = op.SolveJob(data, "draft")
+    job.cancel()
+    job.start()
+    assert job.join(timeout=120)
+    assert job.state == "cancelled" and job.result is None
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
+    # and a job left alone completes with a solution whose basis has one entry per lamp
+    job = op.SolveJob(data, "draft").start()
+    assert job.join(timeout=300)
+    assert job.state == "done", job.error
+    assert job.result.basis.shape[0] == len(LAMPS)
+    # display maps before quantisation: M_k >= 0, sum_k M_k == 1 wherever D is above its floor
+    write = _write()
+    maps = write.display_maps(data, job.result)
+    assert len(maps) == 7
+    for coverage, m in maps.values():
+        assert np.isfinite(m).all() and (m >= 0).all()
+        total = m.astype(np.float64).sum(axis=0)
+        assert coverage.mean() > 0.9                 # unit squares / a 3 x 2 atlas
+        lit = np.abs(total - 1) < 1e-5
+        assert np.all(lit | (total == 0))
+        assert lit.mean() > 0.9
+    # the D floor: an all-dark solution and a single bright leaf give M_k = 0, never NaN/Inf
+    import dataclasses
+    dark = dataclasses.replace(job.result, basis=np.zeros_like(job.result.basis))
+    for _, m in write.display_maps(data, dark).values():
+        assert np.isfinite(m).all() and not m.any()
+    spike = np.zeros_like(job.result.basis)
+    # one bright leaf for lamp 0: the leaf that owns the most texels of the floor
+    from relight_ext.relight_addon.core.texture.mapping import rasterize_patches, texel_elements
+    tm = rasterize_patches(data.uv, data.image, [im.texels.shape[:2] for im in data.images])
+    assert all(im.n_overlap == 0 for im in tm.images)
+    el = texel_elements(job.result.hierarchy, tm)
+    leaf_pos = {int(e): i for i, e in enumerate(job.result.leaves)}
+    spike[0, leaf_pos[int(np.bincount(el).argmax())]] = 1e9
+    spike[1] = 1e-9                         # lamp 1: far below 1e-6 * max(D) -> 0 there
+    maps = write.display_maps(data, dataclasses.replace(job.result, basis=spike))
+    allm = np.concatenate([m.reshape(len(LAMPS), -1, 3) for _, m in maps.values()], axis=1)
+    assert np.isfinite(allm).all()
+    assert allm[1].max() < 1e-12            # (texels near the spike: 1e-9 / D, tiny)
+    assert allm[0].max() > 0.99 and (allm[0] == 0).mean() > 0.5
+    total = allm.sum(axis=0)
+    assert np.all((np.abs(total - 1) < 1e-5) | (total == 0))
+
+
+def test_invoke_in_background_runs_synchronously():
+    _addon()
+    build_scene()
+    assert bpy.app.background
+    assert bpy.ops.relight.precompute("INVOKE_DEFAULT", preset="draft") == {"FINISHED"}
+    assert bpy.data.objects["Floor"].material_slots[0].material.name == "Floor_mat.relight"
+
+
+def test_faces_without_image_are_left_alone_and_no_image_is_an_error():
+    _addon()
+    build_scene()
+    plain = bpy.data.materials.new("Plain_mat")
+    _mesh_object("Plain", _quad((0, -1, 1.0), (0, 1, 0), (0.3, 0.3)), [(0, 1, 2, 3)], plain)
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    assert bpy.data.objects["Plain"].material_slots[0].material == plain
+    assert "relight_original_materials" not in bpy.data.objects["Plain"]
+    assert bpy.data.objects["Floor"].material_slots[0].material.name == "Floor_mat.relight"
+    # No image anywhere: an error, nothing created.
+    bpy.ops.relight.clear()
+    for m in bpy.data.materials:
+        for n in [n for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"]:
+            m.node_tree.nodes.remove(n)
+    counts0 = (len(bpy.data.images), len(bpy.data.materials))
+    with pytest.raises(RuntimeError, match="image texture"):
+        bpy.ops.relight.precompute(preset="draft")
+    assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
