@@ -11,6 +11,8 @@ link levels (the furnace test depends on it).
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
 
@@ -33,7 +35,10 @@ _PLANE_TOL = 1e-9
 _FAR_RATIO = 0.15
 # Chunk sizes for the vectorised oracle (links) and final form factors (sample points).
 _CHUNK_LINKS = 100_000
-_CHUNK_POINTS = 400_000
+_THREADS = min(2, os.cpu_count() or 1)
+# Generalised golden ratios of the R2 sequence (Roberts 2018).
+_R2 = (0.7548776662466927, 0.5698402909980532)
+_CHUNK_POINTS = 100_000
 
 
 @dataclass
@@ -152,6 +157,14 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float,
     return F, spread, free, partial
 
 
+def _kernel(n_r, n_s, d):
+    """cos cos' / r^2 between points (without 1/pi), zero unless both face each other."""
+    dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    cr = d[:, 0] * n_r[:, 0] + d[:, 1] * n_r[:, 1] + d[:, 2] * n_r[:, 2]
+    cs = -(d[:, 0] * n_s[:, 0] + d[:, 1] * n_s[:, 1] + d[:, 2] * n_s[:, 2])
+    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
+
+
 def _mutually_in_front(h, r, s, p, q):
     """Whether the sample pair (p on r, q on s) can exchange light at all.
 
@@ -236,9 +249,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         pair_src = np.repeat(ls, count[lr])
         gap = np.linalg.norm(h.centroid[leaf_ids] - h.centroid[pair_src], axis=1) - radius[pair_src]
         leaf_near[leaf_ids[radius[leaf_ids] > _FAR_RATIO * gap]] = True
-    for links in link_chunks:
-        if len(links) == 0:
-            continue
+    def process(links, chunk_rng):
+        """One chunk of links; writes its rows of F, Fv, seen_* and returns its gather parts."""
+        chunk_parts = []
         lr, ls = r[links], s[links]
         nleaf = count[lr]
         leaf_ids = leaf_of[_segment_ranges(first[lr], nleaf)]           # per (link, leaf) pair
@@ -263,20 +276,30 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             ray_count = per_pt[link_pt]
             ray_pt = np.repeat(np.arange(len(P)), ray_count)
             ray_src = src[ray_pt]
-            xi_u, xi_v = rng.random((2, len(ray_pt), 1))
+            # The rays of one point follow an R2 low-discrepancy sequence with a random shift
+            # (Cranley-Patterson), so few rays still cover the source evenly.
+            j = np.arange(len(ray_pt)) - np.repeat(np.cumsum(ray_count) - ray_count, ray_count)
+            shift = chunk_rng.random((len(P), 2))[ray_pt]
+            xi_u = np.mod(j * _R2[0] + shift[:, 0], 1.0)[:, None]
+            xi_v = np.mod(j * _R2[1] + shift[:, 1], 1.0)[:, None]
             u, v = area_uniform_uv(None, xi_u, xi_v, tuple(j[ray_src] for j in jac))
             uu, vv = u[:, :1], v[:, :1]
             Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
                  + (uu * vv) * twist[ray_src])
             recv_el = lr[link_pt][ray_pt]
-            counts = _mutually_in_front(h, recv_el, ray_src, P[ray_pt], Q)
-            p0, q0 = _offset_segments(h, recv_el, ray_src, P[ray_pt], Q, scale)
+            Pr = P[ray_pt]
+            kernel = _kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
+            counts = kernel > 0
+            p0, q0 = _offset_segments(h, recv_el, ray_src, Pr, Q, scale)
             with timer("visibility"):
                 blocked = occluder.segments_occluded(p0, q0)
             free = counts & ~blocked
             blocked &= counts
-            tried = np.bincount(ray_pt, counts, len(P))
-            free_frac = np.where(tried > 0, np.bincount(ray_pt, free, len(P)) / np.maximum(tried, 1), 1.0)
+            # Visible fraction weighted by the point-to-point kernel (a ratio estimator): the
+            # area fraction alone is biased where the hidden part of the source is nearer.
+            tried = np.bincount(ray_pt, kernel, len(P))
+            free_frac = np.where(tried > 0, np.bincount(ray_pt, kernel * free, len(P))
+                                 / np.where(tried > 0, tried, 1.0), 1.0)
             link_ray = link_pt[ray_pt]
             seen_free[links] |= np.bincount(link_ray, free, len(links)) > 0
             seen_blocked[links] |= np.bincount(link_ray, blocked, len(links)) > 0
@@ -284,12 +307,12 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         F[links] = np.bincount(link_pt, W * f, len(links)) / np.maximum(wsum, 1e-300)
         Fv[links] = np.bincount(link_pt, W * f * free_frac, len(links)) / np.maximum(wsum, 1e-300)
         if not with_leaves:
-            continue
+            return chunk_parts
         pw = np.maximum(np.bincount(pair_pt, W, n_pairs), 1e-300)
         pair_F = np.bincount(pair_pt, W * f, n_pairs) / pw
         if occluder is None or rays <= 0:
-            parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_F.copy()))
-            continue
+            chunk_parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_F.copy()))
+            return chunk_parts
         # Partially visible links gather from the source leaf each free ray lands in, rather
         # than from the source's mean radiosity: a hidden part of a source is often dark too
         # (floor under a box), and the mean would count that darkness a second time.
@@ -297,13 +320,26 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             np.bincount(link_ray, free, len(links)) > 0)
         by_ray = partial_link[link_pt] & (tried > 0)
         pair_FV = np.bincount(pair_pt, np.where(by_ray, 0.0, W * f * free_frac), n_pairs) / pw
-        parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_FV))
+        chunk_parts.append(LeafGather(leaf_ids, ls[link_of], pair_F, pair_FV))
         use = free & by_ray[ray_pt]
         if use.any():
             rp = ray_pt[use]
-            weight = W[rp] * f[rp] / np.maximum(tried[rp], 1) / pw[pair_pt[rp]]
+            weight = W[rp] * f[rp] * kernel[use] / tried[rp] / pw[pair_pt[rp]]
             src_leaf = h.locate(ray_src[use], u[use, 0], v[use, 0])
-            parts.append(LeafGather(leaf_ids[pair_pt[rp]], src_leaf, np.zeros(len(rp)), weight))
+            chunk_parts.append(LeafGather(leaf_ids[pair_pt[rp]], src_leaf, np.zeros(len(rp)), weight))
+        return chunk_parts
+
+    # Chunks are independent: numpy and Embree release the GIL, so two threads keep both cores
+    # busy.  Each chunk has its own random stream, so results do not depend on scheduling.
+    link_chunks = [c for c in link_chunks if len(c)]
+    seeds = rng.integers(0, 2**63 - 1, size=len(link_chunks))
+    jobs = [(c, np.random.default_rng(int(sd))) for c, sd in zip(link_chunks, seeds)]
+    if len(jobs) > 1 and _THREADS > 1:
+        with ThreadPoolExecutor(_THREADS) as pool:
+            results = list(pool.map(lambda job: process(*job), jobs))
+    else:
+        results = [process(*job) for job in jobs]
+    parts = [p for chunk in results for p in chunk]
 
     if occluder is None or rays <= 0:
         seen_free[:] = True

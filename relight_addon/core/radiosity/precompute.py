@@ -19,6 +19,8 @@ from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
 
 MAX_REFINE_ROUNDS = 40
+# Shadow boundaries stop one level above the minimum element size (their links multiply fast).
+SHADOW_AREA_FACTOR = 4.0
 
 
 class Cancelled(Exception):
@@ -125,10 +127,12 @@ def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_a
     want_s = err_src > q.eps_bf * b_scale
     can_r = ar / 4 >= min_area
     can_s = as_ / 4 >= min_area
-    # Shadow boundaries: split the larger side; otherwise the side whose error dominates.
-    split_r = can_r & ((want_r & (err_recv >= err_src)) | (want_r & ~can_s) |
-                       (shadow & ((ar >= as_) | ~can_s)))
-    split_s = ~split_r & can_s & (want_s | shadow)
+    # Shadow boundaries are resolved on the receiver: each receiver point already integrates the
+    # visible part of the whole source with its own rays, so splitting the source there would
+    # only multiply links.  Otherwise split the side whose error dominates.
+    split_r = can_r & ((want_r & ((err_recv >= err_src) | ~can_s)) |
+                       (shadow & (ar / 4 >= SHADOW_AREA_FACTOR * min_area)))
+    split_s = ~split_r & can_s & want_s
     return split_r, split_s
 
 
