@@ -35,6 +35,7 @@ _PLANE_TOL = 1e-9
 _FAR_RATIO = 0.15
 # Chunk sizes for the vectorised oracle (links) and final form factors (sample points).
 _CHUNK_LINKS = 100_000
+_PARALLEL_LINKS = 20_000
 _THREADS = min(2, os.cpu_count() or 1)
 # Generalised golden ratios of the R2 sequence (Roberts 2018).
 _R2 = (0.7548776662466927, 0.5698402909980532)
@@ -120,13 +121,25 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float,
     jittered segments between random points of the two elements.
     """
     n = len(r)
+    if n > _CHUNK_LINKS or (n > _PARALLEL_LINKS and _THREADS > 1):
+        # Chunks bound peak memory on large link sets and keep both cores busy (numpy and
+        # Embree release the GIL); each chunk draws from its own random stream.
+        size = min(_CHUNK_LINKS, -(-n // _THREADS))
+        starts = range(0, n, size)
+        seeds = rng.integers(0, 2**63 - 1, size=len(starts))
+        jobs = [(slice(i, i + size), np.random.default_rng(int(sd))) for i, sd in zip(starts, seeds)]
+        with ThreadPoolExecutor(_THREADS) as pool:
+            parts = list(pool.map(lambda job: _oracle_chunk(
+                h, r[job[0]], s[job[0]], occluder, rays, job[1], scale, timer), jobs))
+        return tuple(np.concatenate(p) for p in zip(*parts))
+    return _oracle_chunk(h, r, s, occluder, rays, rng, scale, timer)
+
+
+def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, timer=_no_timer):
+    n = len(r)
     if n == 0:
         z = np.zeros(0)
         return z, z.copy(), z.copy(), np.zeros(0, bool)
-    if n > _CHUNK_LINKS:                     # bound peak memory on large initial link sets
-        parts = [oracle_estimates(h, r[i:i + _CHUNK_LINKS], s[i:i + _CHUNK_LINKS], occluder, rays,
-                                  rng, scale, timer) for i in range(0, n, _CHUNK_LINKS)]
-        return tuple(np.concatenate(p) for p in zip(*parts))
     k = len(_ORACLE_UV)
     pts = bilinear_point(h.corners[r][:, None], _ORACLE_UV[None, :, 0], _ORACLE_UV[None, :, 1])
     with timer("form_factors"):
