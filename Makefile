@@ -1,7 +1,9 @@
 # Relight: developer commands. See README.md.
 #
 #   make test        create .venv on first use (bpy wheel + runtime + test deps), run pytest
-#   make demo        solve the embedded Cornell box, write out/cornell.png
+#   make demo        solve the embedded Cornell box (out/cornell.png), then relight the photographed
+#                    office through the operator (EEVEE frames, Cycles truth, out/demo_side_by_side.png,
+#                    out/demo.blend; copy in benchmarks/results/demo_office.png)
 #   make extension   download the runtime wheels per platform, build dist/relight-*-<platform>.zip
 #   make test-lts    the same tests against Blender 4.2 LTS (bpy 4.2) in .venv-lts
 #   make clean       remove build output and caches (keeps the venvs; `make distclean` removes them)
@@ -26,6 +28,7 @@ test: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/python -m relight_addon.demo
+	$(VENV)/bin/python -m relight_addon.demo_office
 
 venv: $(STAMP)
 venv-lts: $(STAMP_LTS)
