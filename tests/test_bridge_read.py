@@ -296,8 +296,11 @@ def test_exitance_matches_cycles(kind):
         obj = area_light("L", shape, 0.7, 0.4, power=80.0, location=(0.15, -0.1, 0.8),
                          rotation=(0.25, -0.2, 0.5), scale=(1.2, 1.0, 1.0))
         obj.data.color = (1.0, 0.5, 0.25)
-        obj.data.exposure = 0.5
+        if hasattr(obj.data, "exposure"):              # Blender 4.3+
+            obj.data.exposure = 0.5
         if kind == "UNNORMALIZED":
+            if not hasattr(obj.data, "normalize"):       # Blender 4.3+
+                pytest.skip("this Blender has no unnormalized light power")
             obj.data.normalize = False
         if kind == "MIRRORED":  # negative scale: Cycles emits along the transformed -Z axis
             obj.rotation_euler = (math.pi + 0.25, -0.2, 0.5)
