@@ -4,8 +4,8 @@ Uses Blender's own extension CLI from the bpy wheel (tools/blender_ext.py finds 
 the zip into a throw-away user folder (BLENDER_USER_RESOURCES) in a fresh interpreter, so the
 developer's own Blender configuration is never touched.
 
-The zip is dist/relight-<version>-linux_x64.zip when `make extension` has built it; otherwise
-the same linux-x64 zip, with its bundled wheels, is built into a temp dir.
+The linux-x64 zip, with its bundled wheels, is built from the current tree into a temp dir, as
+`make extension` builds it (a zip left in dist/ may predate the sources).
 """
 
 from __future__ import annotations
@@ -80,9 +80,7 @@ def _build_linux_zip(tmp_dir: str) -> str:
 
 @pytest.fixture(scope="module")
 def extension_zip(tmp_path_factory) -> str:
-    built = os.path.join(ROOT, "dist", f"{ADDON_ID}-{MANIFEST['version']}-linux_x64.zip")
-    if os.path.exists(built):
-        return built
+    # Always built from the current tree: a zip left in dist/ may predate the sources.
     return _build_linux_zip(str(tmp_path_factory.mktemp("build")))
 
 
@@ -157,6 +155,25 @@ _INSTALL_SCRIPT = textwrap.dedent("""
     result["has_panel"] = hasattr(bpy.types, "RELIGHT_PT_main")
     result["run"] = sorted(bpy.ops.relight.check_dependencies()) if result["has_operator"] else None
     result["version"] = sys.modules[module + ".panels.main"].addon_version()
+    result["operators"] = sorted(op for op in ("precompute", "restore_originals", "clear")
+                                 if hasattr(bpy.ops.relight, op))
+    # A real Precompute from the installed copy: a textured floor under an area light.
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    floor = bpy.context.active_object
+    image = bpy.data.images.new("floor_photo", 8, 8)
+    image.pixels.foreach_set([0.5] * (8 * 8 * 4))
+    image.pack()
+    mat = bpy.data.materials.new("floor_mat")
+    mat.use_nodes = True
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    floor.data.materials.append(mat)
+    bpy.ops.object.light_add(type='AREA', location=(0.0, 0.0, 1.5))
+    bpy.context.active_object.data.energy = 50.0
+    result["precompute"] = sorted(bpy.ops.relight.precompute(preset="draft"))
+    result["relit_material"] = floor.material_slots[0].material.name
     # Wheels are unpacked into <user>/extensions/.local/... while the add-on is enabled.
     user = os.environ["BLENDER_USER_RESOURCES"]
     result["site_packages"] = sorted(
@@ -199,6 +216,9 @@ def test_install_enable_run(extension_zip, tmp_path):
     assert result["run"] == ["FINISHED"], output
     assert "Relight: available:" in output and "ray casting:" in output, output
     assert result["version"] == MANIFEST["version"]
+    assert result["operators"] == ["clear", "precompute", "restore_originals"], result
+    assert result["precompute"] == ["FINISHED"], output
+    assert result["relit_material"] == "floor_mat.relight", result
     assert result["after_disable"] == {"enabled": False, "has_operator_class": False, "has_panel": False}
 
     # Bundled wheels (when the zip has them) are unpacked into the user site-packages,
