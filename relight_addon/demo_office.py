@@ -44,15 +44,14 @@ emission-only, so EEVEE shows the texel values directly.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
-import sys
 import time
 
 import numpy as np
 
+from .dev import register_repo_addon
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PKG = "relight_ext"
 FRAMES = (1, 2, 3)
 
 
@@ -62,19 +61,6 @@ def lamp_schedule(powers):
     return {1: {"Lamp A": pa, "Lamp B": pb},
             2: {"Lamp A": 0.0, "Lamp B": pb},
             3: {"Lamp A": 0.0, "Lamp B": 2.0 * pb}}
-
-
-def register_addon():
-    """Load the repository root (the extension package) as ``relight_ext`` and register it."""
-    if PKG in sys.modules:
-        return sys.modules[PKG]
-    spec = importlib.util.spec_from_file_location(
-        PKG, os.path.join(ROOT, "__init__.py"), submodule_search_locations=[ROOT])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[PKG] = module
-    spec.loader.exec_module(module)
-    module.register()
-    return module
 
 
 def _eevee_engine(scene):
@@ -218,7 +204,7 @@ def main(argv=None):
     times["build + bake (cached after the first run)"] = time.perf_counter() - t0
 
     # 2. Precompute through the operator.
-    register_addon()
+    register_repo_addon()
     t0 = time.perf_counter()
     result = bpy.ops.relight.precompute(preset=args.preset)
     times[f"precompute operator ({args.preset})"] = time.perf_counter() - t0

@@ -14,9 +14,8 @@ Scene (built in code, factory-empty): a closed 4 x 4 x 3 m room of six inward-fa
 each with its own material (UV Map node -> 16 x 16 Image Texture -> Principled base colour),
 a 0.8 m box on the floor (one material, one image), two 0.5 m area lights under the ceiling.
 """
-import importlib.util
+import importlib
 import os
-import sys
 import tempfile
 
 import numpy as np
@@ -24,22 +23,15 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
+from relight_addon.dev import PACKAGE as PKG, register_repo_addon  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PKG = "relight_ext"
 TEX = 16
 LAMPS = {"LampA": ((-1.0, 0.0, 2.9), 60.0), "LampB": ((1.0, 0.5, 2.9), 30.0)}
 
 
 def _addon():
-    if PKG in sys.modules:
-        return sys.modules[PKG]
-    spec = importlib.util.spec_from_file_location(
-        PKG, os.path.join(ROOT, "__init__.py"), submodule_search_locations=[ROOT])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[PKG] = module
-    spec.loader.exec_module(module)
-    module.register()
-    return module
+    return register_repo_addon()
 
 
 def _write():
