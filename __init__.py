@@ -6,10 +6,10 @@ import inside the extension is relative. The maths lives in ``relight_addon`` (`
 imports bpy); ``operators`` and ``panels`` hold the thin UI layer.
 """
 
-from . import operators, panels
+from . import operators, panels, preferences
 
-# Registration order: operators first, then the panels that reference them.
-_modules = (operators, panels)
+# Registration order: preferences, operators, then the panels that reference them.
+_modules = (preferences, operators, panels)
 
 
 def register():

@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies, precompute
+from . import dependencies, precompute, unwrap
 
-_modules = (dependencies, precompute)
+_modules = (dependencies, precompute, unwrap)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 

@@ -44,6 +44,19 @@ def read_for_precompute(context):
     return data, report, None
 
 
+def memory_error(context, data, preset):
+    """Bad input check: an error message when the estimated peak memory of the solve exceeds
+    the add-on preference ``memory_limit_gb`` (checked before solving; nothing is changed)."""
+    from .. import preferences
+    from ..relight_addon.core.radiosity.memory import estimate_precompute_memory
+    estimate, limit = estimate_precompute_memory(data, preset), preferences.memory_limit_bytes(context)
+    if estimate <= limit:
+        return None
+    return (f"Relight precompute ({preset}) needs about {estimate / 2**30:.2f} GB, more than the "
+            f"{limit / 2**30:.2f} GB memory limit (add-on preferences): choose a lower preset, "
+            f"fewer faces, or raise the limit")
+
+
 class SolveJob:
     """The radiosity solve in a worker thread. ``state``: running / done / cancelled / failed."""
 
@@ -116,6 +129,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
     def execute(self, context):
         _, _, precompute = _modules()
         data, read_report, error = read_for_precompute(context)
+        error = error or memory_error(context, data, self.preset)
         if error:
             self.report({'ERROR'}, error)
             return {'CANCELLED'}
@@ -130,6 +144,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
         if bpy.app.background or context.window is None:
             return self.execute(context)
         data, read_report, error = read_for_precompute(context)
+        error = error or memory_error(context, data, self.preset)
         if error:
             self.report({'ERROR'}, error)
             return {'CANCELLED'}

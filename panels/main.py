@@ -31,6 +31,7 @@ class RELIGHT_PT_main(bpy.types.Panel):
         layout = self.layout
         layout.label(text=f"Relight {addon_version()}", icon='LIGHT')
         layout.operator("relight.check_dependencies", icon='CHECKMARK')
+        layout.operator("relight.unwrap_missing", icon='UV')
         # A menu of the quality presets: picking one starts the (modal) precompute.
         layout.operator_menu_enum("relight.precompute", "preset", text="Precompute", icon='LIGHT_AREA')
         row = layout.row(align=True)
