@@ -37,6 +37,8 @@ $(STAMP): $(REQ_MAIN)
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_MAIN))
+	@# Optional: glslangValidator for tests/test_overlay_shaders.py (skipped without it); never fails.
+	command -v glslangValidator >/dev/null || (command -v apt-get >/dev/null && (apt-get install -y -q glslang-tools || (apt-get update -q && apt-get install -y -q glslang-tools)) ) || true
 	@touch $@
 
 # bpy 4.2 needs its own venv: one bpy per interpreter.
