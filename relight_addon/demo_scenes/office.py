@@ -236,6 +236,43 @@ def office_geometry(seed: int = 0, n_lamps: int = 2, texture_size: int = 48,
     return OfficeData(surfaces, lamps, n, seed)
 
 
+def office_scene_data(data: OfficeData, textures: dict | None = None):
+    """The office as a SceneData (bpy-free), with ``textures`` {surface name: (H, W, 3) linear}
+    as the images (default: the true albedo).  Lamps are one-sided emitting rectangles (exitance
+    P / A, Blender's Normalize) that block no rays, like Blender area lights; ``group`` is the
+    surface index; the viewpoint is the camera.  Image i belongs to surface i."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from ..core.scene import SceneData  # noqa: PLC0415
+    corners, uvs, image, group = [], [], [], []
+    images = []
+    for i, s in enumerate(data.surfaces):
+        tex = s.albedo if textures is None else textures[s.name]
+        images.append(SimpleNamespace(name=s.name, texels=np.asarray(tex, np.float32)))
+        corners.append(s.quads)
+        uvs.append(s.uvs)
+        image += [i] * len(s.quads)
+        group += [i] * len(s.quads)
+    n = sum(len(c) for c in corners)
+    k = len(data.lamps)
+    lamp_c = np.array([lp.corners for lp in data.lamps])
+    exitance = np.array([lp.power / (lp.size[0] * lp.size[1]) for lp in data.lamps])
+    emission = np.zeros((n + k, 3))
+    emission[n:] = exitance[:, None]
+    return SceneData(
+        corners=np.concatenate(corners + [lamp_c]),
+        rho=np.full((n + k, 3), 0.5) * np.r_[np.ones(n), np.zeros(k)][:, None],
+        emission=emission,
+        lamp=np.r_[np.full(n, -1), np.arange(k)],
+        lamp_names=[lp.name for lp in data.lamps],
+        occluder=np.r_[np.ones(n, bool), np.zeros(k, bool)],
+        group=np.r_[group, np.full(k, -1)],
+        uv=np.concatenate(uvs + [np.zeros((k, 4, 2))]),
+        image=np.r_[image, np.full(k, -1)],
+        images=images,
+        viewpoint=np.asarray(data.camera_location, float))
+
+
 # -- Blender ------------------------------------------------------------------------------------
 
 def _new_image(bpy, name, pixels_rgb):

@@ -39,6 +39,8 @@ class RadiositySolution:
     info: SolveInfo
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)   # rays cast
+    # What regather() needs to recompute the leaf transport after further subdivision.
+    context: dict = field(default_factory=dict, repr=False)
 
     @property
     def leaves(self):
@@ -297,5 +299,45 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
     counts = {"rays": occluder.rays if occluder is not None else 0, "cluster_links": len(cX)}
+    context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV)}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
-                             dict(timer), counts)
+                             dict(timer), counts, context)
+
+
+def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=None):
+    """Recompute the leaf gather after leaves were split outside the oracle (texture-based
+    refinement), keeping the links, and solve the per-lamp basis again.
+
+    rho_leaf (L, 3): per-leaf reflectance (default: the patch's); emission_scale (k,): factor on
+    each lamp's exitance.  Updates ``solution`` in place and returns it.
+    """
+    h, q, ctx = solution.hierarchy, solution.quality, solution.context
+    rng = np.random.default_rng(seed)
+    links = solution.links
+    F, V, vis, gather = final_form_factors(h, links.receiver, links.source, ctx.get("occluder"),
+                                           q.quadrature, q.rays, rng, ctx.get("scale", 1.0),
+                                           with_leaves=True)
+    solution.links = LinkSet(links.receiver, links.source, F, V, vis)
+    solution.gather = gather
+    system = LeafSystem(h, gather.leaf, gather.source, gather.FV, solution.scene.rho)
+    tree, cX, cY, cV = ctx.get("clusters", (None, (), (), ()))
+    if len(cX):
+        system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
+    solution.system = system
+    solve_basis(solution, rho_leaf, emission_scale)
+    return solution
+
+
+def solve_basis(solution: RadiositySolution, rho_leaf=None, emission_scale=None):
+    """Solve the per-lamp basis again on the current leaf system, with optional per-leaf
+    reflectances and per-lamp exitance factors (links and form factors unchanged)."""
+    system = solution.system
+    if rho_leaf is not None:
+        system.rho = np.asarray(rho_leaf, float)
+    E = _lamp_emission(solution.scene, system.patch)
+    if emission_scale is not None:
+        E = E * np.asarray(emission_scale, float)[None, None, :]
+    basis, info = system.solve(E, solution.quality.solver, tol=solution.quality.tol)
+    solution.basis = np.moveaxis(basis, 2, 0)
+    solution.info = info
+    return solution

@@ -1,0 +1,233 @@
+"""Shadow-free textures (issue 3) against Cycles truth, on a small fast office.
+
+The office of demo_scenes.office (2 lamps of 40 W, 24^2 texels per surface).  Photo and truth
+are Cycles DIFFUSE bakes of each lamp alone (adaptive sampling off, cached in .cache/bakes)
+from independent seeds, combined linearly for every lighting.  Thresholds are looser than the
+benchmark's (benchmarks/results/shadowfree.md), so that CI catches regressions; every figure is
+compared with the noise floor (photo vs truth at the original lighting) measured here.
+"""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from relight_addon.core.relight.shadowfree import (FACTOR_MAX, ShadowFreeOptions,  # noqa: E402
+                                                   shadow_free)
+from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402
+from relight_addon.core.texture.mapping import rasterize_patches  # noqa: E402
+from relight_addon.demo_scenes.bake import bake_lighting  # noqa: E402
+from relight_addon.demo_scenes.office import build_office, office_scene_data  # noqa: E402
+
+SIZE = 24
+SAMPLES = 512
+LUM = np.array([0.2126, 0.7152, 0.0722])
+A, B = "Lamp A", "Lamp B"
+
+
+def _lamp_bakes(info, seeds, samples=SAMPLES):
+    powers = dict(info.lamp_powers)
+    out = {}
+    for lamp in powers:
+        only = {k: (v if k == lamp else 0.0) for k, v in powers.items()}
+        out[lamp] = {s: bake_lighting(only, samples=samples, seed=s, texture_size=SIZE) for s in seeds}
+    return out
+
+
+class Office:
+    """Photo (seed 0) and truth (seed 1) per lamp, texel map, shadow masks, helpers."""
+
+    def __init__(self, albedo=None):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        self.info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
+        if albedo is not None:               # e.g. a white room
+            for name in self.info.objects:
+                img = bpy.data.images[self.info.albedo_images[name]]
+                px = np.ones(len(img.pixels), np.float32)
+                px.reshape(-1, 4)[:, :3] = albedo
+                img.pixels.foreach_set(px)
+                img.update()
+                s = self.info.data.surface(name)
+                s.albedo[:] = albedo
+        self.bakes = _lamp_bakes(self.info, (0, 1))
+        self.names = [s.name for s in self.info.data.surfaces]
+        self.photo_imgs = self.combine(0, {})
+        self.scene = office_scene_data(self.info.data, self.photo_imgs)
+        shapes = [im.texels.shape[:2] for im in self.scene.images]
+        self.tm = rasterize_patches(self.scene.uv, self.scene.image, shapes)
+        self.photo = self.texels(self.photo_imgs)
+        self.white = float(np.percentile(self.truth({}) @ LUM, 99))
+        self._masks = None
+
+    def combine(self, seed, intensities):
+        return {o: sum(float(intensities.get(k, 1.0)) * self.bakes[k][seed][o] for k in (A, B))
+                for o in self.names}
+
+    def texels(self, imgs):
+        return self.tm.gather([imgs[n] for n in self.names]).astype(np.float64)
+
+    def truth(self, intensities):
+        return self.texels(self.combine(1, intensities))
+
+    def relit(self, result, intensities):
+        out = result.relit([intensities.get(A, 1.0), intensities.get(B, 1.0)])
+        return self.tm.gather([out[i] for i in range(len(self.names))]).astype(np.float64)
+
+    def de(self, x, y):
+        return delta_e_2000(linear_rgb_to_lab(np.clip(x / self.white, 0, None)),
+                            linear_rgb_to_lab(np.clip(y / self.white, 0, None)))
+
+    def shadow(self, lamp):
+        """Texels where ``lamp`` gives >= 10 % of the unoccluded direct light and at least half
+        of it is blocked (ray casting on the geometry)."""
+        if self._masks is None:
+            from relight_addon.core.geometry.raycast import make_occluder
+            from relight_addon.core.relight.direct import lamp_irradiance
+            from relight_addon.core.scene import bilinear_point
+            sc, tm = self.scene, self.tm
+            pts = bilinear_point(sc.corners[tm.patch][:, None], tm.u[:, None], tm.v[:, None])[:, 0]
+            U, O = lamp_irradiance(sc, pts, sc.area_normal()[1][tm.patch],
+                                   make_occluder(sc.occluder_triangles()), rays=64, seed=3)
+            u, o = U @ LUM, O @ LUM
+            share = u / np.maximum(u.sum(axis=1, keepdims=True), 1e-300)
+            self._masks = {n: (share[:, j] >= 0.1) & (o[:, j] <= 0.5 * u[:, j])
+                           for j, n in enumerate((A, B))}
+        return self._masks[lamp]
+
+
+@pytest.fixture(scope="module")
+def office():
+    return Office()
+
+
+@pytest.fixture(scope="module")
+def results(office):
+    out = {}
+    for mode in ("texel", "element", "none"):
+        out[mode] = shadow_free(office.scene, ShadowFreeOptions(mode=mode, preset="medium"))
+    return out
+
+
+def test_noise_floor_is_small(office):
+    d = office.de(office.photo, office.truth({}))
+    assert d.mean() < 1.2, d.mean()
+
+
+def test_exitance_estimates(office, results):
+    """Equal real lamps: eq 4.2 is equal by construction, the shadow-edge fit finds the ratio
+    within 10 %; NNLS on the eq 4.1 reflectances (reported) is non-negative and finite."""
+    for res in results.values():
+        assert np.all(np.isfinite(res.exitance_nnls)) and np.all(res.exitance_nnls >= 0)
+        assert res.exitance_equal[0] == pytest.approx(res.exitance_equal[1])
+        ratio = res.exitance_scale[0] / res.exitance_scale[1]
+        assert 0.9 < ratio < 1.1, ratio
+
+
+def test_texel_mode_reproduces_the_photo(office, results):
+    res = results["texel"]
+    got = office.relit(res, {})
+    lit = np.any(got > 0, axis=1)
+    assert lit.mean() > 0.98
+    np.testing.assert_allclose(got[lit], office.photo[lit], rtol=1e-4, atol=1e-7)
+    t_final = office.tm.gather([res.texture[i] for i in range(len(office.names))])
+    assert np.all(t_final >= office.photo.astype(np.float32) * (1 - 1e-6))   # never darkens
+
+
+def test_lamp_switched_off(office, results):
+    """Lamp A off: the relit texture loses A's shadows.  Texel mode is far better than DRB97 (no
+    texture correction) and the global exposure scale in A's former shadow."""
+    figures = {}
+    floor = office.de(office.photo, office.truth({}))
+    for lamp in (A, B):
+        I = {lamp: 0.0}
+        truth = office.truth(I)
+        m = office.shadow(lamp)
+        assert m.sum() > 100
+        ratio = sum(office.info.lamp_powers[k] * I.get(k, 1.0) for k in (A, B)) / \
+            sum(office.info.lamp_powers.values())
+        d_scale = office.de(office.photo * ratio, truth)
+        d = {mode: office.de(office.relit(res, I), truth) for mode, res in results.items()}
+        figures[lamp] = {k: (v.mean(), v[m].mean()) for k, v in {**d, "scale": d_scale}.items()}
+        texel_all, texel_shadow = figures[lamp]["texel"]
+        floor_shadow = floor[m].mean()
+        assert texel_all < floor.mean() + 0.4, (floor.mean(), figures)
+        # above the noise floor, at most half of DRB97's error in the former shadow
+        assert texel_shadow - floor_shadow < 0.5 * (figures[lamp]["none"][1] - floor_shadow), \
+            (floor_shadow, figures)
+        assert texel_shadow < 0.4 * figures[lamp]["scale"][1], figures
+        # Element mode (the seed's reference elements) is weaker in the shadows than DRB97 on
+        # these textured surfaces (see shadowfree.md): a regression guard only.
+        el_all, el_shadow = figures[lamp]["element"]
+        assert el_all < 3.0 and el_shadow < 9.0, figures
+
+
+def test_element_mode_pipeline(office, results):
+    res = results["element"]
+    s = res.stats
+    assert s["first_texture_splits"] > 0            # the texture-based refinement split leaves
+    assert s["shadowed_leaves"] > 0 and s["frontier_leaves"] > 0
+    assert s["referenced"] + s["default_reference"] > 0
+    d = office.de(office.relit(res, {}), office.photo)
+    assert d.mean() < 1.5, d.mean()                 # original lighting (element resolution)
+    for tex in res.texture.values():
+        assert np.isfinite(tex).all()
+
+
+def test_lamp_at_100x_matches_truth(office, results):
+    """Linearity: relit(100, 1) = 100 relit(1, 0) + relit(0, 1), and it matches the truth."""
+    res = results["texel"]
+    big = office.relit(res, {A: 100.0})
+    assert np.isfinite(big).all() and big.min() >= 0
+    parts = 100 * office.relit(res, {B: 0.0}) + office.relit(res, {A: 0.0})
+    np.testing.assert_allclose(big, parts, rtol=1e-4, atol=1e-6)
+    truth = office.truth({A: 100.0})
+    x, y = big / 100, truth / 100
+    d = delta_e_2000(linear_rgb_to_lab(np.clip(x / office.white, 0, None)),
+                     linear_rgb_to_lab(np.clip(y / office.white, 0, None)))
+    assert d.mean() < 2.0, d.mean()
+
+
+def test_all_lamps_off_is_black(office, results):
+    for res in results.values():
+        out = res.relit([0.0, 0.0])
+        for img in out.values():
+            assert np.isfinite(img).all() and not img.any()
+
+
+def test_black_and_saturated_texels(office):
+    """Pure black and saturated (far above 1) texels: finite everywhere, black stays black,
+    saturated texels scale linearly, factors within their floors."""
+    imgs = {k: v.copy() for k, v in office.photo_imgs.items()}
+    imgs["Floor"][:4, :4] = 0.0
+    imgs["Wall North"][:3, :3] = 50.0
+    imgs["Table"][:] = 0.0                            # a whole black object
+    sc = office_scene_data(office.info.data, imgs)
+    for mode in ("texel", "element"):
+        res = shadow_free(sc, ShadowFreeOptions(mode=mode, preset="draft"))
+        for i, tex in res.texture.items():
+            assert np.isfinite(tex).all() and np.isfinite(res.maps[i]).all()
+            assert tex.max() <= 50.0 * FACTOR_MAX
+        floor = office.names.index("Floor")
+        assert not res.texture[floor][:4, :4].any()
+        table = office.names.index("Table")
+        for I in ([1, 1], [0, 1], [3, 0.5]):
+            out = res.relit(I)
+            assert all(np.isfinite(v).all() for v in out.values())
+            assert not out[table][res.coverage[table]].any()
+
+
+@pytest.fixture(scope="module")
+def white_room():
+    return Office(albedo=0.9)
+
+
+def test_white_room(white_room):
+    """rho 0.9 everywhere (strong interreflection): the solve converges, the ratio is found,
+    switching a lamp off matches the truth."""
+    o = white_room
+    res = shadow_free(o.scene, ShadowFreeOptions(mode="texel", preset="medium", rho_mean=0.9))
+    assert 0.85 < res.exitance_scale[0] / res.exitance_scale[1] < 1.15
+    got = o.relit(res, {A: 0.0})
+    assert np.isfinite(got).all()
+    d = o.de(got, o.truth({A: 0.0}))
+    floor = o.de(o.photo, o.truth({}))
+    assert d.mean() < floor.mean() + 1.0, (d.mean(), floor.mean())
