@@ -16,6 +16,15 @@ import threading
 import bpy
 from bpy.props import EnumProperty
 
+CORRECTION_ITEMS = (
+    ("TEXEL", "Per Texel", "Remove the real lamps' shadows from the textures texel by texel "
+                           "(ray-cast visibility per texel; most accurate)"),
+    ("ELEMENT", "Per Element", "Remove the shadows per radiosity element with frontier and "
+                               "reference elements (the original method)"),
+    ("NONE", "Off", "Keep the photographed shadows in the textures (they stay when a lamp "
+                    "is switched off)"),
+)
+
 PRESET_ITEMS = (
     ("draft", "Draft", "Fastest, coarse shadows"),
     ("medium", "Medium", "Balanced"),
@@ -29,6 +38,13 @@ def _modules():
     from ..relight_addon.blender import read, write
     from ..relight_addon.core.radiosity import precompute
     return read, write, precompute
+
+
+def run_precompute(data, preset, correction="TEXEL", progress=None):
+    """The bpy-free precompute: shadow-free textures and per-lamp display maps."""
+    from ..relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
+    options = ShadowFreeOptions(mode=correction.lower(), preset=preset)
+    return shadow_free(data, options, progress=progress)
 
 
 def read_for_precompute(context):
@@ -60,9 +76,10 @@ def memory_error(context, data, preset):
 class SolveJob:
     """The radiosity solve in a worker thread. ``state``: running / done / cancelled / failed."""
 
-    def __init__(self, scene_data, preset):
+    def __init__(self, scene_data, preset, correction="TEXEL"):
         self.scene_data = scene_data
         self.preset = preset
+        self.correction = correction
         self.fraction = 0.0
         self.message = "Starting"
         self.result = None
@@ -92,8 +109,8 @@ class SolveJob:
     def _run(self):
         _, _, precompute = _modules()
         try:
-            self.result = precompute.solve_radiosity(self.scene_data, self.preset,
-                                                     progress=self._progress)
+            self.result = run_precompute(self.scene_data, self.preset, self.correction,
+                                         progress=self._progress)
             self.state = "cancelled" if self._cancel.is_set() else "done"
         except precompute.Cancelled:
             self.state = "cancelled"
@@ -111,6 +128,9 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
 
     preset: EnumProperty(name="Preset", items=PRESET_ITEMS, default="medium",
                          description="Quality preset (speed <-> accuracy)")
+    correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
+                             description="How the photographed shadows of the real lamps are "
+                                         "removed from the textures")
 
     _timer = None
     _job = None
@@ -134,7 +154,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             self.report({'ERROR'}, error)
             return {'CANCELLED'}
         try:
-            solution = precompute.solve_radiosity(data, self.preset)
+            solution = run_precompute(data, self.preset, self.correction)
         except Exception as ex:
             self.report({'ERROR'}, f"Relight precompute failed: {type(ex).__name__}: {ex}")
             return {'CANCELLED'}
@@ -149,7 +169,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             self.report({'ERROR'}, error)
             return {'CANCELLED'}
         self._data, self._read_report = data, read_report
-        self._job = SolveJob(data, self.preset).start()
+        self._job = SolveJob(data, self.preset, self.correction).start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 100)

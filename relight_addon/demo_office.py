@@ -8,8 +8,9 @@ Steps (all headless, bpy as a module):
    outgoing radiance as the photo's linear texel value, float, packed), which replaces the true
    albedo as its material's Base Color image.  The true-albedo materials are kept aside as
    ``"<obj> truth material"`` (fake user) for the Cycles truth.
-2. Register the add-on and run ``bpy.ops.relight.precompute(preset=...)`` (texture correction
-   off: relit material = photo x sum_k I_k M_k -> Emission, I_k driven by the lamp energy).
+2. Register the add-on and run ``bpy.ops.relight.precompute(preset=...)`` (per-texel shadow
+   removal: relit material = T_final x sum_k I_k M_k -> Emission, I_k driven by the lamp
+   energy).
 3. Keyframes on the light data ``energy`` (made constant where the action API allows; the
    values at the keyed frames are exact either way), P = 40 W, the original power of each:
 
@@ -32,10 +33,9 @@ Steps (all headless, bpy as a module):
    x 4 for frames 1 and 3 (where the relit frames are wrong); out/demo.blend (everything packed,
    relit materials assigned, frame 1).
 
-Texture correction (shadow-free textures) is not implemented yet: the photo keeps the shadows
-and the light of lamp A, so with lamp A off the relit frames still show lamp A's shadows (under
-the table, on the left wall) that the Cycles truth does not have.  The frame-3 difference is that
-plus the radiosity solver's own error, over a floor measured on frame 1 (photo texels vs pixels,
+The photo's shadows of lamp A are removed from T_final (per texel), so with lamp A off the
+relit frames lose them as the Cycles truth does.  The frame-3 difference is the shadow removal's
+and the radiosity solver's error, over a floor measured on frame 1 (photo texels vs pixels,
 Cycles noise).
 
 Colour: Standard view transform, exposure 0, no look; sRGB PNGs, 8 bits.  The relit materials are
@@ -170,7 +170,7 @@ def main(argv=None):
     parser.add_argument("--out", default="out")
     parser.add_argument("--preset", default="medium")
     parser.add_argument("--texture-size", type=int, default=48)
-    parser.add_argument("--bake-samples", type=int, default=64)
+    parser.add_argument("--bake-samples", type=int, default=256)
     parser.add_argument("--res", default="320x240")
     parser.add_argument("--eevee-samples", type=int, default=8)
     parser.add_argument("--cycles-samples", type=int, default=64)
@@ -271,8 +271,8 @@ def main(argv=None):
         la, lb = srgb_to_linear(a), srgb_to_linear(b)
         diffs[f] = dict(srgb255=float(np.abs(a - b).mean() * 255),
                         linear_rel=float(np.abs(la - lb).mean() / max(lb.mean(), 1e-12)))
-    note = ("Relit = photo x sum_k I_k M_k (texture correction off): lamp A's baked shadows and "
-            "light stay in the photo texture.")
+    note = ("Relit = T_final x sum_k I_k M_k: T_final is the photo with the real lamps' shadows "
+            "removed per texel, M_k lamp k's share of the light.")
     side = os.path.join(out, "demo_side_by_side.png")
     pa, pb = powers0["Lamp A"], powers0["Lamp B"]
     side_by_side([img["relit1"], img["relit3"], img["truth3"]],
@@ -309,9 +309,8 @@ def main(argv=None):
         print(f"  frame {f}: relit (EEVEE) vs Cycles truth: mean |diff| {diffs[f]['srgb255']:.1f}"
               f"/255 (sRGB), {100 * diffs[f]['linear_rel']:.1f} % of the mean (linear)")
     print("  Frame 1 is the floor: the photo is a 48^2-texel Cycles bake (Closest filtering, texel "
-          "blocks and\n  edges) against a per-pixel Cycles render.  Frame 3 keeps lamp A's shadows "
-          "and light baked into\n  the photo (left wall, under the table): texture correction "
-          "(shadow-free textures) is not\n  implemented yet.")
+          "blocks and\n  edges) against a per-pixel Cycles render.  Frame 3 adds the error of the "
+          "shadow removal\n  (benchmarks/results/shadowfree.md measures it on the textures).")
     print(f"  -> {side}, {blend}, {', '.join(os.path.basename(p) for p in frames.values())}")
     return dict(times=times, diffs=diffs, side=side, blend=blend)
 

@@ -4,7 +4,7 @@ Issue "Blender path", section Persistence and renders:
 
 * keyframing lamp power and rendering an animation headless
   (``bpy.ops.render.render(animation=True)``) gives frames whose relit surfaces match
-  ``T x sum_k I_k(t) M_k`` within 1 %, in EEVEE and in Cycles (T_final is the original T for now);
+  ``T x sum_k I_k(t) M_k`` within 1 %, in EEVEE and in Cycles, T_final being the shadow-free texture (per-texel correction);
 * rendering the saved .blend in a fresh process with the extension not installed and Python
   auto-run off gives the same frames (what a render-farm worker sees);
 * save, reopen: the relit materials are still assigned and the images packed (no recompute).
@@ -19,8 +19,8 @@ resolution equals the texture's, so pixel (i, j) sees texel (i, j) only (Closest
 interpolation; pixel filter 0.01 px in Cycles, 0 in EEVEE), both counted from the bottom like
 ``Image.pixels``.  The lamps hang 10 cm under the ceiling, behind the camera.  Emission
 strength 1 seen head-on renders the emission colour, so the expected pixel is
-``srgb_to_linear(T) * sum_k I_k M_k`` with T the 8-bit sRGB original and M_k the packed
-half-float map as Blender loaded it.  Output: OpenEXR 32-bit float (linear, unclamped, no
+``T_final * sum_k I_k M_k`` with T_final and M_k the packed half-float images as Blender loaded
+them.  Output: OpenEXR 32-bit float (linear, unclamped, no
 view transform), Standard view transform anyway, exposure 0, no denoising.
 
 Measured (Blender 5.0.1 as a module, CPU only): Cycles matches the formula to ~5e-7 relative
@@ -206,15 +206,15 @@ def relit(tmp_path_factory):
     _setup_render(scene)
     relit_mat = bpy.data.objects[VIEWED].material_slots[0].material
     assert relit_mat.name == mat.name + ".relight"
-    t_img = mat.node_tree.nodes[next(n.name for n in mat.node_tree.nodes
-                                     if n.bl_idname == "ShaderNodeTexImage")].image
+    t_img = relit_mat.node_tree.nodes["T"].image          # the shadow-free texture T_final
+    assert t_img.name.endswith(".relight.T") and t_img.is_float
     maps = {n.name[2:]: n.image for n in relit_mat.node_tree.nodes
             if n.bl_idname == "ShaderNodeTexImage" and n.name.startswith("M ")}
     assert set(maps) == set(LAMPS)
     for n in relit_mat.node_tree.nodes:
         if n.bl_idname == "ShaderNodeTexImage":
             assert n.interpolation == "Closest", n.name
-    t_lin = srgb_to_linear(_pixels(t_img)[..., :3])
+    t_lin = _pixels(t_img)[..., :3].astype(np.float64)      # half float, linear
     m = {k: _pixels(im)[..., :3].astype(np.float64) for k, im in maps.items()}
     expected = {f: t_lin * sum(intensities(f)[k] * m[k] for k in LAMPS) for f in FRAMES}
     # the drivers in this process give the scheduled intensities
@@ -372,7 +372,7 @@ def test_reopened_file_keeps_relit_data_without_addon(relit, worker):
         for im in lamp_maps.values():
             assert im in worker["images"]
     gen = {k: v for k, v in worker["images"].items() if ".relight." in k}
-    assert len(gen) == 7 * len(LAMPS)
+    assert len(gen) == 7 * (len(LAMPS) + 1)                   # maps and T_final
     for name, v in gen.items():
         assert v["packed"] and v["float"] and v["users"] >= 1 and v["size"] == [TEX, TEX], name
     for name, v in worker["images"].items():

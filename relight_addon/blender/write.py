@@ -1,12 +1,16 @@
-"""Write a radiosity solution back into Blender (the maths -> bpy half of the bridge).
+"""Write a precompute back into Blender (the maths -> bpy half of the bridge).
 
-``write_results(context, scene_data, report, solution) -> dict``
+``write_results(context, scene_data, report, result) -> dict``
 
-Mode "texture correction off" (the DRB97 baseline): the texture ``T`` is the original image,
-the display factor is ``D = sum_k B_k`` (the radiosity with every lamp at its precompute-time
-power) and the per-lamp display maps are ``M_k = B_k / D`` per texel, so that with every
-``I_k = 1`` the relit material shows exactly the original texture.
+``result`` is a :class:`~relight_addon.core.relight.shadowfree.ShadowFreeResult`: per image the
+shadow-free texture ``T_final`` and one display map ``M_k`` per lamp, so that the relit colour is
+``T_final * sum_k I_k M_k`` (per-texel or per-element shadow removal; with the correction off,
+the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``).  A bare
+RadiositySolution is accepted too (correction off, maps from :func:`display_maps`).
 
+* ``T_final`` is written as ``"<image>.relight.T"`` (half float, Non-Color = linear, unclamped
+  above 1, packed) and replaces the image of the relit material's copy of the texture node
+  (named ``"T"``); the original image is never modified.
 * Per-lamp leaf radiosity is turned into element-vertex values and interpolated per texel
   (:func:`vertex_interpolate` twin: ``vertex_values`` once per lamp, then per image).
 * ``D`` is floored at ``DISPLAY_EPS * max(D)`` (per channel, max over every written texel):
@@ -46,6 +50,8 @@ ORIGINALS = "relight_original_materials"
 POWER0 = "relight_power0"
 DISPLAY_EPS = 1e-6     # D is floored at DISPLAY_EPS * max(D); below it M_k = 0
 SEAM_PIXELS = 4
+HALF_MAX = 65504.0
+T_NODE = "T"
 MAT_SUFFIX = ".relight"
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
@@ -141,6 +147,7 @@ class _HalfWriter:
 
     def write(self, name, rgb):
         import os
+        rgb = np.clip(np.nan_to_num(rgb), -HALF_MAX, HALF_MAX)   # half floats end at 65504
         tmp = _float_image("relight_tmp_image", rgb)
         path = os.path.join(self.dir, "image.exr")
         try:
@@ -201,8 +208,9 @@ def _add_driver(socket, light_data, p0, label):
     return fc
 
 
-def _relit_material(orig, image_name, maps, lamps):
-    """maps: list of bpy images (one per lamp); lamps: list of (name, light data or None, P0)."""
+def _relit_material(orig, image_name, maps, lamps, t_image=None):
+    """maps: list of bpy images (one per lamp); lamps: list of (name, light data or None, P0);
+    t_image: the shadow-free texture T_final (None: the original image is T)."""
     mat = orig.copy()
     mat.name = orig.name + MAT_SUFFIX
     mat[GENERATED] = 1
@@ -225,6 +233,9 @@ def _relit_material(orig, image_name, maps, lamps):
         tex.image = bpy.data.images[image_name]
     elif tex.inputs["Vector"].is_linked:
         vec_src = tex.inputs["Vector"].links[0].from_socket
+    if t_image is not None:       # the copy's node only: the original material keeps its image
+        tex.image = t_image
+    tex.name, tex.label = T_NODE, "T_final" if t_image is not None else "T (original)"
     x0 = tex.location.x + 300
     y0 = tex.location.y
     total = None
@@ -355,6 +366,9 @@ def has_relight_data() -> bool:
 def write_results(context, scene_data, report, solution) -> dict:
     """Write the display maps and relit materials; replaces a previous result (clear first).
 
+    ``solution``: a ShadowFreeResult (T_final and M_k per image; T_final is written as
+    ``"<image>.relight.T"`` unless the correction was off) or a bare RadiositySolution (texture
+    correction off, maps by :func:`display_maps`).
     Returns a summary dict (images, materials, objects, lamps, skipped, warnings)."""
     warnings = []
     clear_relight_data(context)
@@ -391,16 +405,29 @@ def write_results(context, scene_data, report, solution) -> dict:
         warnings.append(f"'{obj_name}' / material '{mat_name or '(none)'}': faces without an "
                         "image texture are left unchanged")
 
-    maps = display_maps(scene_data, solution, warnings=warnings)
+    textures = {}
+    if hasattr(solution, "maps"):
+        maps = {i: (solution.coverage[i], solution.maps[i]) for i in solution.maps}
+        if solution.options.mode != "none":
+            textures = solution.texture
+        for i, im in enumerate(solution.texel_map.images):
+            if im.n_overlap:
+                warnings.append(f"Image '{scene_data.images[i].name}': {im.n_overlap} texel(s) "
+                                "are used by several faces (overlapping UVs); they show the "
+                                "light of one face only")
+    else:
+        maps = display_maps(scene_data, solution, warnings=warnings)
 
     # Images, one per (used image, lamp).
-    made_images = {}
+    made_images, t_images = {}, {}
     writer = _HalfWriter()
     try:
         for i, (coverage, m) in maps.items():
             src = scene_data.images[i].name
             made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j])
                               for j, (lname, _, _) in enumerate(lamps)]
+            if i in textures:
+                t_images[i] = writer.write(f"{src}.relight.T", textures[i])
     finally:
         writer.close()
 
@@ -410,7 +437,8 @@ def write_results(context, scene_data, report, solution) -> dict:
         orig = bpy.data.materials.get(mat_name)
         if orig is None or i not in made_images:
             continue
-        relit[mat_name] = _relit_material(orig, scene_data.images[i].name, made_images[i], lamps)
+        relit[mat_name] = _relit_material(orig, scene_data.images[i].name, made_images[i], lamps,
+                                          t_images.get(i))
 
     # Assign: record every object's originals first (meshes may be shared), then swap.
     objects = set()
@@ -434,6 +462,7 @@ def write_results(context, scene_data, report, solution) -> dict:
                 slot.material = relit[slot.material.name]
                 assigned += 1
     report.warnings.extend(w for w in warnings if w not in report.warnings)
-    return {"images": sum(len(v) for v in made_images.values()), "materials": len(relit),
+    return {"images": sum(len(v) for v in made_images.values()) + len(t_images),
+            "materials": len(relit),
             "objects": len(objects), "slots": assigned, "lamps": len(lamps),
             "warnings": warnings}
