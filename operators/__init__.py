@@ -3,11 +3,20 @@
 
 import bpy
 
-from . import dependencies, precompute, unwrap
+from . import dependencies, lamps, precompute, settings, unwrap
 
-_modules = (dependencies, precompute, unwrap)
+_modules = (settings, dependencies, precompute, unwrap, lamps)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
+_register, _unregister = bpy.utils.register_classes_factory(classes)
 
-register, unregister = bpy.utils.register_classes_factory(classes)
+
+def register():
+    _register()
+    settings.attach()
+
+
+def unregister():
+    settings.detach()
+    _unregister()

@@ -12,25 +12,12 @@ write the display maps and relit materials (main thread).
 """
 
 import threading
+import time
 
 import bpy
 from bpy.props import EnumProperty
 
-CORRECTION_ITEMS = (
-    ("TEXEL", "Per Texel", "Remove the real lamps' shadows from the textures texel by texel "
-                           "(ray-cast visibility per texel; most accurate)"),
-    ("ELEMENT", "Per Element", "Remove the shadows per radiosity element with frontier and "
-                               "reference elements (the original method)"),
-    ("NONE", "Off", "Keep the photographed shadows in the textures (they stay when a lamp "
-                    "is switched off)"),
-)
-
-PRESET_ITEMS = (
-    ("draft", "Draft", "Fastest, coarse shadows"),
-    ("medium", "Medium", "Balanced"),
-    ("high", "High", "Accurate"),
-    ("ultra", "Ultra", "Slowest, most accurate"),
-)
+from .settings import CORRECTION_ITEMS, PRESET_ITEMS, store_status
 
 
 def _modules():
@@ -57,6 +44,11 @@ def read_for_precompute(context):
         return data, report, "; ".join(report.errors)
     if data.image is None or not (data.image >= 0).any():
         return data, report, "No face uses an image texture: nothing to relight"
+    textured = {report.groups[int(g)][0] for g in set(data.group[data.image >= 0].tolist())}
+    objs = [bpy.data.objects.get(n) for n in textured]
+    if objs and all(o is not None and not write.slots_editable(o) for o in objs):
+        return data, report, ("Every textured object is linked from a library (read-only): make "
+                              "them local or add library overrides first")
     return data, report, None
 
 
@@ -137,9 +129,15 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
     _data = None
     _read_report = None
 
+    _t0 = 0.0
+
     def _finish(self, context, data, read_report, solution):
         _, write, _ = _modules()
         summary = write.write_results(context, data, read_report, solution)
+        if hasattr(solution, "stats"):
+            from ..relight_addon.core.scene import scene_fingerprint
+            store_status(context.scene, solution, time.perf_counter() - self._t0, self.correction,
+                         scene_fingerprint(data))
         for w in summary["warnings"]:
             self.report({'WARNING'}, w)
         self.report({'INFO'}, f"Relight: {summary['materials']} material(s), "
@@ -147,7 +145,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
         return {'FINISHED'}
 
     def execute(self, context):
-        _, _, precompute = _modules()
+        self._t0 = time.perf_counter()
         data, read_report, error = read_for_precompute(context)
         error = error or memory_error(context, data, self.preset)
         if error:
@@ -163,6 +161,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
+        self._t0 = time.perf_counter()
         data, read_report, error = read_for_precompute(context)
         error = error or memory_error(context, data, self.preset)
         if error:
@@ -240,4 +239,35 @@ class RELIGHT_OT_clear(bpy.types.Operator):
         return {'FINISHED'}
 
 
-classes = (RELIGHT_OT_precompute, RELIGHT_OT_restore, RELIGHT_OT_clear)
+class RELIGHT_OT_update(bpy.types.Operator):
+    """Re-run the precompute if the scene changed since the last one (geometry, UVs, textures,
+    lamp positions, sizes or colours, quality settings); lamp powers need no update"""
+
+    bl_idname = "relight.update"
+    bl_label = "Update"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        return self._run(context, "EXEC_DEFAULT")
+
+    def invoke(self, context, event):
+        return self._run(context, "INVOKE_DEFAULT")
+
+    def _run(self, context, how):
+        from ..relight_addon.core.scene import scene_fingerprint
+        from .settings import status
+        _, write, _ = _modules()
+        settings = context.scene.relight
+        st = status(context.scene)
+        if st and write.has_relight_data() and st.get("preset") == settings.preset \
+                and st.get("correction") == settings.correction:
+            data, _, error = read_for_precompute(context)
+            if error is None and st.get("fingerprint") == scene_fingerprint(data):
+                self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
+                                      "precompute)")
+                return {'FINISHED'}
+        return bpy.ops.relight.precompute(how, preset=settings.preset,
+                                          correction=settings.correction)
+
+
+classes = (RELIGHT_OT_precompute, RELIGHT_OT_update, RELIGHT_OT_restore, RELIGHT_OT_clear)

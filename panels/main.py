@@ -2,6 +2,7 @@
 """RELIGHT_PT_main: the top panel of the sidebar "Relight" tab."""
 
 import functools
+import math
 import os
 
 import bpy
@@ -20,6 +21,26 @@ def addon_version():
         return "?"
 
 
+def status_lines(scene):
+    """(text, icon) lines describing the last precompute (empty before the first)."""
+    from ..operators.settings import status
+    st = status(scene)
+    if not st:
+        return []
+    lines = [(f"{st['elements']:,} elements, {st['links']:,} links", 'MESH_GRID'),
+             (f"{st['seconds']:.1f} s ({st['preset']}, shadow removal {st['correction'].lower()})",
+              'TIME')]
+    if math.isfinite(st.get("misfit", float("nan"))):
+        lines.append((f"Model vs photo: {100 * st['misfit']:.1f} % RMS", 'INFO'))
+    for name, rel in zip(st["lamps"], st["relative_exitance"]):
+        obj = bpy.data.objects.get(name)
+        now = ""
+        if obj is not None and obj.type == "LIGHT" and obj.data.get("relight_power0"):
+            now = f"  I = {obj.data.energy / obj.data['relight_power0']:.2f}"
+        lines.append((f"{name}: estimated {rel:.2f}x{now}", 'LIGHT_AREA'))
+    return lines
+
+
 class RELIGHT_PT_main(bpy.types.Panel):
     bl_idname = "RELIGHT_PT_main"
     bl_label = "Relight"
@@ -32,8 +53,22 @@ class RELIGHT_PT_main(bpy.types.Panel):
         layout.label(text=f"Relight {addon_version()}", icon='LIGHT')
         layout.operator("relight.check_dependencies", icon='CHECKMARK')
         layout.operator("relight.unwrap_missing", icon='UV')
-        # A menu of the quality presets: picking one starts the (modal) precompute.
-        layout.operator_menu_enum("relight.precompute", "preset", text="Precompute", icon='LIGHT_AREA')
+        settings = getattr(context.scene, "relight", None)
+        if settings is not None:
+            col = layout.column(align=True)
+            col.prop(settings, "preset")
+            col.prop(settings, "correction")
+            row = layout.row(align=True)
+            op = row.operator("relight.precompute", text="Precompute", icon='LIGHT_AREA')
+            op.preset = settings.preset
+            op.correction = settings.correction
+            row.operator("relight.update", icon='FILE_REFRESH')
+        lines = status_lines(context.scene)
+        if lines:
+            box = layout.box()
+            for text, icon in lines:
+                box.label(text=text, icon=icon)
+            box.operator("relight.match_lamp_powers", icon='LIGHT_SUN')
         row = layout.row(align=True)
         row.operator("relight.restore_originals", icon='LOOP_BACK')
         row.operator("relight.clear", icon='TRASH')

@@ -431,3 +431,196 @@ def test_faces_without_image_are_left_alone_and_no_image_is_an_error():
     with pytest.raises(RuntimeError, match="image texture"):
         bpy.ops.relight.precompute(preset="draft")
     assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
+
+
+@pytest.fixture
+def fresh():
+    """A new room, precomputed (earlier tests rebuild and clear the shared one)."""
+    _addon()
+    build_scene()
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+
+
+def test_status_for_the_panel(fresh):
+    """The panel's status: counts, time, model misfit, each lamp's estimated exitance."""
+    st = bpy.context.scene["relight_status"].to_dict()
+    assert st["elements"] > 0 and st["links"] > 0 and st["seconds"] > 0
+    assert st["correction"] == "TEXEL" and st["preset"] == "draft"
+    assert list(st["lamps"]) == list(LAMPS)
+    assert 0 <= st["misfit"] < 1
+    assert all(x > 0 for x in st["exitance_scale"])
+    assert abs(sum(st["relative_exitance"]) / len(LAMPS) - 1) < 1e-9
+    panel = importlib.import_module(PKG + ".panels.main")
+    lines = [t for t, _ in panel.status_lines(bpy.context.scene)]
+    assert any("elements" in t for t in lines)
+    assert sum(t.startswith(("LampA", "LampB")) for t in lines) == 2
+    assert any("I = 1.00" in t for t in lines), lines
+
+
+def test_match_lamp_powers_keeps_the_relit_look(fresh):
+    """Powers become P0 * pi * s_k; drivers and relight_power0 follow, so every I_k stays 1;
+    a second run changes nothing."""
+    scene = bpy.context.scene
+    st = scene["relight_status"].to_dict()
+    before = {k: bpy.data.lights[k].energy for k in LAMPS}
+    try:
+        assert bpy.ops.relight.match_lamp_powers() == {"FINISHED"}
+        bpy.context.view_layer.update()
+        for k, s in zip(st["lamps"], st["exitance_scale"]):
+            want = before[k] * np.pi * s
+            assert bpy.data.lights[k].energy == pytest.approx(want, rel=1e-6)
+            assert bpy.data.lights[k]["relight_power0"] == pytest.approx(want, rel=1e-6)
+            for mat in [m for m in bpy.data.materials if m.get("relight_generated")]:
+                assert abs(_value_node(mat, k).outputs[0].default_value - 1.0) < 1e-6
+        after = {k: bpy.data.lights[k].energy for k in LAMPS}
+        assert bpy.ops.relight.match_lamp_powers() == {"FINISHED"}
+        for k in LAMPS:
+            assert bpy.data.lights[k].energy == pytest.approx(after[k], rel=1e-9)
+    finally:
+        for k, p in before.items():
+            bpy.data.lights[k].energy = p
+            bpy.data.lights[k]["relight_power0"] = p
+        for mat in [m for m in bpy.data.materials if m.get("relight_generated")]:
+            for fc in mat.node_tree.animation_data.drivers:
+                light = fc.driver.variables[0].targets[0].id
+                fc.driver.expression = f"p / {light.energy!r}"
+        scene["relight_status"] = st
+
+
+def _relit_state():
+    return ({o.name: [s.material.name if s.material else "" for s in o.material_slots]
+             for o in bpy.data.objects if o.type == "MESH"},
+            sorted(im.name for im in bpy.data.images if im.get("relight_generated")),
+            "relight_status" in bpy.context.scene)
+
+
+def test_undo_precompute_and_restore():
+    """Undo after Precompute gives the scene back as it was (originals assigned, no generated
+    data, no status); redo brings the relit result back; undo after Restore re-assigns the
+    relit materials.  Headless Blender has no automatic undo steps for script-called
+    operators, so steps are pushed explicitly around each call, as the UI does."""
+    _addon()
+    build_scene()
+    bpy.ops.ed.undo_push(message="built")
+    before = _relit_state()
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="precomputed")
+    relit = _relit_state()
+    assert relit != before and relit[1] and relit[2]
+    bpy.ops.ed.undo()
+    assert _relit_state() == before
+    imgs0, mats0, _ = _snapshot()
+    bpy.ops.ed.redo()
+    assert _relit_state() == relit
+    assert bpy.ops.relight.restore_originals() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="restored")
+    restored = _relit_state()
+    assert restored[0] == before[0] and restored[1] == relit[1]
+    bpy.ops.ed.undo()
+    assert _relit_state() == relit
+    # the originals survived the round trips untouched
+    for name, px in imgs0.items():
+        np.testing.assert_array_equal(_pixels(bpy.data.images[name]), px)
+
+
+def _link_from_library(tmp_path, names):
+    """Save the room as a library, rebuild it, and replace ``names`` by linked objects."""
+    for im in bpy.data.images:
+        im.pack()
+    lib = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=lib, copy=True)
+    build_scene()
+    for n in names:
+        bpy.data.objects.remove(bpy.data.objects[n])
+    with bpy.data.libraries.load(lib, link=True) as (src, dst):
+        dst.objects = list(names)
+    for o in dst.objects:
+        bpy.context.scene.collection.objects.link(o)
+    bpy.context.view_layer.update()
+
+
+def test_linked_objects_are_left_alone(tmp_path):
+    """A linked (read-only) object keeps its material, casts shadows, gets no relit copy and no
+    maps; the others are relit."""
+    _addon()
+    build_scene()
+    _link_from_library(tmp_path, ["Box"])
+    box = bpy.data.objects["Box"]
+    assert box.library is not None
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    assert box.material_slots[0].material.name == "Box_mat"
+    gen_mats = [m.name for m in bpy.data.materials if m.get("relight_generated")]
+    gen_imgs = [i.name for i in bpy.data.images if i.get("relight_generated")]
+    assert len(gen_mats) == 6 and "Box_mat.relight" not in gen_mats
+    assert len(gen_imgs) == 6 * (len(LAMPS) + 1) and not any(n.startswith("Box") for n in gen_imgs)
+    assert bpy.data.objects["Floor"].material_slots[0].material.name == "Floor_mat.relight"
+
+
+def test_all_linked_is_an_error_without_changes(tmp_path):
+    _addon()
+    build_scene()
+    names = ["Floor", "Ceiling", "WallXn", "WallXp", "WallYn", "WallYp", "Box"]
+    _link_from_library(tmp_path, names)
+    before = _relit_state()
+    with pytest.raises(RuntimeError, match="linked from a library"):
+        bpy.ops.relight.precompute(preset="draft")
+    assert _relit_state() == before
+
+
+def test_cancel_midway_changes_nothing():
+    """Esc in the middle of the work (here: once the progress passes 30 %) stops the worker at
+    its next progress report; nothing is written."""
+    _addon()
+    build_scene()
+    op = importlib.import_module(PKG + ".operators.precompute")
+    data, report, error = op.read_for_precompute(bpy.context)
+    assert error is None
+    before = _relit_state()
+    job = op.SolveJob(data, "draft")
+    seen = []
+    report_progress = job._progress
+
+    def progress(fraction, message):
+        seen.append(fraction)
+        if fraction >= 0.3:
+            job.cancel()
+        return report_progress(fraction, message)
+
+    job._progress = progress
+    job.start()
+    assert job.join(timeout=120)
+    assert job.state == "cancelled" and job.result is None
+    assert any(f >= 0.3 for f in seen) and max(seen) < 1.0
+    assert _relit_state() == before
+
+
+def test_update_reuses_an_unchanged_result():
+    """Update does nothing when nothing that matters changed (a lamp's power is followed by the
+    drivers), and re-runs after a lamp moved or the quality changed."""
+    _addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+
+    def stamp():
+        return bpy.data.images["Floor_mat_img.relight.T"].as_pointer(), \
+            scene["relight_status"]["fingerprint"]
+
+    first = stamp()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert stamp() == first
+    bpy.data.lights["LampA"].energy *= 3
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert stamp() == first
+    bpy.data.objects["LampA"].location.x += 0.3
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    moved = stamp()
+    assert moved[1] != first[1]
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert stamp() == moved
+    scene.relight.preset = "medium"
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert scene["relight_status"]["preset"] == "medium"
+    assert len([m for m in bpy.data.materials if m.get("relight_generated")]) == 7

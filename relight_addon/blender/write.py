@@ -361,6 +361,19 @@ def has_relight_data() -> bool:
         any(_is_generated(i) for i in bpy.data.images)
 
 
+def _editable(idb) -> bool:
+    if idb is None:
+        return True
+    return bool(getattr(idb, "is_editable", idb.library is None)) and idb.library is None
+
+
+def slots_editable(obj) -> bool:
+    """Whether every material slot of ``obj`` can be reassigned (slots linked to the object
+    live in the object, the others in its mesh; library data is read-only)."""
+    return _editable(obj) and all(_editable(obj.data if slot.link == "DATA" else obj)
+                                  for slot in obj.material_slots)
+
+
 # -- entry point -------------------------------------------------------------------------------
 
 def write_results(context, scene_data, report, solution) -> dict:
@@ -405,6 +418,23 @@ def write_results(context, scene_data, report, solution) -> dict:
         warnings.append(f"'{obj_name}' / material '{mat_name or '(none)'}': faces without an "
                         "image texture are left unchanged")
 
+    # Library (read-only) objects keep their materials: no relit copy, no maps for them.
+    for mat_name in list(mat_objects):
+        keep = set()
+        for obj_name in sorted(mat_objects[mat_name]):
+            obj = bpy.data.objects.get(obj_name)
+            if obj is not None and not slots_editable(obj):
+                warnings.append(f"'{obj_name}' is linked from a library (read-only): its "
+                                "material is left as is; it still casts shadows")
+                continue
+            keep.add(obj_name)
+        if keep:
+            mat_objects[mat_name] = keep
+        else:
+            del mat_objects[mat_name]
+            mat_image.pop(mat_name, None)
+    used_images = set(mat_image.values())
+
     textures = {}
     if hasattr(solution, "maps"):
         maps = {i: (solution.coverage[i], solution.maps[i]) for i in solution.maps}
@@ -423,6 +453,8 @@ def write_results(context, scene_data, report, solution) -> dict:
     writer = _HalfWriter()
     try:
         for i, (coverage, m) in maps.items():
+            if i not in used_images:
+                continue
             src = scene_data.images[i].name
             made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j])
                               for j, (lname, _, _) in enumerate(lamps)]

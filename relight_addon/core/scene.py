@@ -205,3 +205,30 @@ def quads_from_boxes(center, size) -> np.ndarray:
         [[x0, y0, z0], [x0, y0, z1], [x0, y1, z1], [x0, y1, z0]],  # left (-x)
         [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],  # right (+x)
     ])
+
+
+def scene_fingerprint(data: SceneData) -> str:
+    """A hash of everything a precompute depends on: geometry, UVs, reflectances, textures,
+    which patches emit, block rays and belong together, and each lamp's colour, but not the
+    lamps' powers (the relit materials follow those through their drivers)."""
+    import hashlib
+    h = hashlib.sha256()
+    emission = np.asarray(data.emission, np.float64)
+    colour = np.zeros_like(emission)
+    for k in range(data.n_lamps):
+        sel = data.lamp == k
+        peak = emission[sel].max() if sel.any() else 0.0
+        if peak > 0:
+            colour[sel] = emission[sel] / peak
+    arrays = [data.corners, data.rho, colour, data.lamp, data.occluder, data.group]
+    arrays += [a for a in (data.uv, data.image) if a is not None]
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype, a.shape)).encode())
+        h.update(a.tobytes())
+    h.update(repr(list(data.lamp_names)).encode())
+    for im in data.images:
+        tex = np.ascontiguousarray(getattr(im, "texels", im))
+        h.update(str(tex.shape).encode())
+        h.update(tex.tobytes())
+    return h.hexdigest()
