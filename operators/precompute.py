@@ -17,7 +17,7 @@ import time
 import bpy
 from bpy.props import EnumProperty
 
-from .settings import CORRECTION_ITEMS, PRESET_ITEMS, store_status
+from .settings import CORRECTION_ITEMS, LAST_RESULT, PRESET_ITEMS, store_status, update_overlay
 
 
 def _modules():
@@ -138,6 +138,10 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             from ..relight_addon.core.scene import scene_fingerprint
             store_status(context.scene, solution, time.perf_counter() - self._t0, self.correction,
                          scene_fingerprint(data))
+            LAST_RESULT["result"] = solution
+            settings = getattr(context.scene, "relight", None)
+            if settings is not None:
+                update_overlay(settings, context)
         for w in summary["warnings"]:
             self.report({'WARNING'}, w)
         self.report({'INFO'}, f"Relight: {summary['materials']} material(s), "

@@ -27,12 +27,54 @@ PRESET_ITEMS = (
 )
 
 
+OVERLAY_ITEMS = (
+    ("NONE", "None", "No overlay"),
+    ("RATIO", "B / D", "Radiosity elements coloured by B / D: white where nothing blocks the "
+                       "light, blue in shadow"),
+    ("VISIBILITY", "Visibility", "Elements coloured by how they see the lamps: green visible, "
+                                 "yellow partial, grey hidden"),
+    ("FRONTIER", "Frontier / Reference", "Per-element shadow removal with reference elements: "
+                                         "frontier green, shadowed with a reference yellow, "
+                                         "without grey"),
+    ("LINKS", "Links", "The links that carry the most light"),
+)
+
+# The last precompute's result, kept in memory for the overlays (not saved in the .blend).
+LAST_RESULT = {}
+
+
+def update_overlay(settings, context):
+    """Show the chosen overlay of the last precompute (no-op in background mode)."""
+    if bpy.app.background:
+        return
+    from ..relight_addon.blender import overlay
+    from ..relight_addon.core.display.colormap import MODE_RATIO, MODE_VISIBILITY
+    from ..relight_addon.core.display.elements import element_values, strongest_links
+    overlay.clear_overlay_data()
+    result = LAST_RESULT.get("result")
+    mode = settings.overlay
+    if mode == "NONE" or result is None:
+        overlay.unregister_overlay()
+        return
+    if mode == "LINKS":
+        overlay.set_link_data(*strongest_links(result))
+    else:
+        corners, values = element_values(result, mode)
+        overlay.set_overlay_data(corners, values,
+                                 MODE_RATIO if mode == "RATIO" else MODE_VISIBILITY)
+    overlay.register_overlay()
+
+
 class RelightSceneSettings(bpy.types.PropertyGroup):
     preset: EnumProperty(name="Quality", items=PRESET_ITEMS, default="medium",
                          description="Quality preset (speed <-> accuracy)")
     correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
+    overlay: EnumProperty(name="Overlay", items=OVERLAY_ITEMS, default="NONE",
+                          update=update_overlay,
+                          description="Draw the last precompute's radiosity elements or links "
+                                      "in the viewport")
 
 
 def status(scene):
@@ -67,3 +109,7 @@ def attach():
 def detach():
     if hasattr(bpy.types.Scene, "relight"):
         del bpy.types.Scene.relight
+    LAST_RESULT.clear()
+    if not bpy.app.background:
+        from ..relight_addon.blender import overlay
+        overlay.unregister_overlay()

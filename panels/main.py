@@ -63,6 +63,8 @@ class RELIGHT_PT_main(bpy.types.Panel):
             op.preset = settings.preset
             op.correction = settings.correction
             row.operator("relight.update", icon='FILE_REFRESH')
+        if settings is not None:
+            layout.prop(settings, "overlay")
         lines = status_lines(context.scene)
         if lines:
             box = layout.box()

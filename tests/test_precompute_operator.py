@@ -624,3 +624,16 @@ def test_update_reuses_an_unchanged_result():
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert scene["relight_status"]["preset"] == "medium"
     assert len([m for m in bpy.data.materials if m.get("relight_generated")]) == 7
+
+
+def test_overlay_setting_is_inert_in_background(fresh):
+    """The overlay enum can be set headless (farms, tests) and draws nothing there; the last
+    result is kept in memory for it."""
+    s = bpy.context.scene.relight
+    for mode in ("RATIO", "VISIBILITY", "FRONTIER", "LINKS", "NONE"):
+        s.overlay = mode
+    overlay = importlib.import_module(PKG + ".relight_addon.blender.overlay")
+    assert not overlay.is_registered()
+    settings = importlib.import_module(PKG + ".operators.settings")
+    assert settings.LAST_RESULT["result"].stats["elements"] == \
+        bpy.context.scene["relight_status"]["elements"]

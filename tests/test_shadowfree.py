@@ -236,3 +236,40 @@ def test_white_room(white_room):
     d = o.de(got, o.truth({A: 0.0}))
     floor = o.de(o.photo, o.truth({}))
     assert d.mean() < floor.mean() + 1.0, (d.mean(), floor.mean())
+
+
+def test_overlay_values(office, results):
+    """What the viewport overlays draw, checked against the geometry: floor under the table
+    slab is in shadow (B/D low, a lamp hidden), the open floor by the east wall is lit, the
+    ceiling sees no lamp; the strongest link comes from a lamp."""
+    from relight_addon.core.display.elements import element_values, strongest_links
+    from relight_addon.demo_scenes.office import LAMP_GAP, ROOM, TABLE
+    res = results["texel"]
+
+    def centroids(corners):
+        return corners.mean(axis=1)
+
+    corners, ratio = element_values(res, "RATIO")
+    assert np.all((ratio >= 0) & (ratio <= 1))
+    c = centroids(corners)
+    floor = np.abs(c[:, 2]) < 1e-6
+    (x0, x1), (y0, y1) = TABLE["x"], TABLE["y"]
+    under = floor & (c[:, 0] > x0 + 0.3) & (c[:, 0] < x1 - 0.3) & (c[:, 1] > y0 + 0.3) & (c[:, 1] < y1 - 0.3)
+    open_ = floor & (np.hypot(c[:, 0] - 4.7, c[:, 1] - 1.5) < 0.3)
+    assert under.sum() >= 3 and open_.sum() >= 3
+    assert np.median(ratio[under]) < 0.5
+    assert np.median(ratio[open_]) > 0.85
+    corners, vis = element_values(res, "VISIBILITY")
+    c = centroids(corners)
+    assert set(np.unique(vis)) <= {0.0, 1.0, 2.0}
+    under_v = (np.abs(c[:, 2]) < 1e-6) & (np.abs(c[:, 0] - 0.5 * (x0 + x1)) < 0.3) & \
+        (np.abs(c[:, 1] - 0.5 * (y0 + y1)) < 0.2)
+    assert under_v.any() and np.all(vis[under_v] == 2)
+    ceiling = np.abs(c[:, 2] - ROOM[2]) < 1e-6
+    assert ceiling.any() and np.all(vis[ceiling] == 0)
+    starts, ends = strongest_links(res, 100)
+    assert len(starts) == 100
+    assert abs(ends[0, 2] - (ROOM[2] - LAMP_GAP)) < 1e-6       # a lamp is the top source
+    corners, codes = element_values(results["element+references"], "FRONTIER")
+    assert {0.0, 1.0} <= set(np.unique(codes))
+    assert len(element_values(res, "FRONTIER")[1]) == 0       # texel mode has none

@@ -46,6 +46,8 @@ _state = {
     "values": None,      # (6n,) float32
     "mode": MODE_RATIO,
     "alpha": 0.6,
+    "lines": None,       # (2m, 3) float32 link segments, drawn with a builtin shader
+    "line_batch": None,
 }
 
 
@@ -95,8 +97,18 @@ def set_overlay_data(corners, values, mode=MODE_RATIO, alpha=None):
     _tag_redraw()
 
 
+def set_link_data(starts, ends):
+    """Store link segments (receiver -> source centroids) to draw as lines."""
+    a = np.asarray(starts, np.float32).reshape(-1, 3)
+    b = np.asarray(ends, np.float32).reshape(-1, 3)
+    _state["lines"] = np.ascontiguousarray(np.stack([a, b], axis=1).reshape(-1, 3))
+    _state["line_batch"] = None
+    _tag_redraw()
+
+
 def clear_overlay_data():
     _state["positions"] = _state["values"] = _state["batch"] = None
+    _state["lines"] = _state["line_batch"] = None
     _tag_redraw()
 
 
@@ -141,8 +153,26 @@ def _build_shader():
     return gpu.shader.create_from_info(shader_create_info())
 
 
+def _draw_lines():
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+
+    shader = gpu.shader.from_builtin("UNIFORM_COLOR")
+    if _state["line_batch"] is None:
+        _state["line_batch"] = batch_for_shader(shader, "LINES", {"pos": _state["lines"]})
+    gpu.state.blend_set("ALPHA")
+    try:
+        shader.bind()
+        shader.uniform_float("color", (1.0, 0.85, 0.2, 0.25))
+        _state["line_batch"].draw(shader)
+    finally:
+        gpu.state.blend_set("NONE")
+
+
 def _draw():
     """The SpaceView3D POST_VIEW callback."""
+    if _state["lines"] is not None and len(_state["lines"]):
+        _draw_lines()
     if _state["positions"] is None or len(_state["positions"]) == 0:
         return
     import bpy

@@ -118,6 +118,7 @@ class ShadowFreeResult:
     first_solution: object | None = None
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    reference_info: dict | None = None   # frontier / reference codes per first-solution leaf
 
     def relit(self, intensities=None) -> dict:
         """T_final x sum_k I_k M_k per image (covered texels meaningful)."""
@@ -332,10 +333,12 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stage(0.7, "Frontier and reference elements (eq 4.8, 4.9)")
     n_shadowed = n_ref = n_default = n_frontier = 0
     t_final = t_inter
+    reference_info = None
     if opt.reference:
-        corr, info = _reference_correction(sol, tm, elem, t_inter, HU_k.sum(0), Docc_k, DU_k,
-                                           occluder, opt)
+        corr, info, codes = _reference_correction(sol, tm, elem, t_inter, HU_k.sum(0), Docc_k,
+                                                  DU_k, occluder, opt)
         n_shadowed, n_frontier, n_ref, n_default = info
+        reference_info = {"hierarchy": sol.hierarchy, "leaves": sol.leaves.copy(), "codes": codes}
         t_final = t_inter * per_texel(corr)
 
     # 5. Fresh solution on T_final: B with visibility, D from its unoccluded gather.
@@ -367,7 +370,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stats.update(shadowed_leaves=n_shadowed, frontier_leaves=n_frontier, referenced=n_ref,
                  default_reference=n_default, photo_misfit=misfit)
     return ShadowFreeResult(opt, tm, tex, mp, cov, scale_k, eq_k, nnls_k, sol, first, stats,
-                            timings)
+                            timings, reference_info)
 
 
 def photo_misfit(sol, tm, photo, textured):
@@ -640,8 +643,9 @@ def _camera_visible(sol, leaves, occluder):
 
 
 def _reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, opt):
-    """Per-leaf factor rho_corr / rho_inter (L, 3) and (shadowed, frontier, referenced,
-    defaulted) counts."""
+    """Per-leaf factor rho_corr / rho_inter (L, 3), (shadowed, frontier, referenced,
+    defaulted) counts, and per-leaf codes for the overlay (frontier 0, shadowed with a
+    reference 1, without 2, others -1)."""
     h = sol.hierarchy
     leaves = sol.leaves
     L = len(leaves)
@@ -672,9 +676,11 @@ def _reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, op
     if len(fidx):
         fidx = fidx[_camera_visible(sol, leaves[fidx], occluder)]
     corr = np.ones((L, 3))
+    codes = np.full(L, -1, np.int8)
+    codes[fidx] = 0
     sidx = np.flatnonzero(shadowed & has_tex)
     if len(sidx) == 0:
-        return corr, (0, len(fidx), 0, 0)
+        return corr, (0, len(fidx), 0, 0), codes
     white = float(np.percentile(_lum(rho_inter[has_tex]), 99)) if has_tex.any() else 1.0
     lab = _lab_of(rho_inter, white)
     ref = np.full(len(sidx), -1, np.int64)
@@ -706,7 +712,8 @@ def _reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, op
     has_ref = ref >= 0
     si, ri = sidx[has_ref], ref[has_ref]
     corr[si] = _ratio(rho_inter[ri], rho_inter[si])
-    return corr, (len(sidx), len(fidx), int(has_ref.sum()) - defaulted, defaulted)
+    codes[sidx] = np.where(has_ref, 1, 2)
+    return corr, (len(sidx), len(fidx), int(has_ref.sum()) - defaulted, defaulted), codes
 
 
 # -- step 5 / texel mode: maps -------------------------------------------------------------------
