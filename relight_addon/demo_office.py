@@ -213,7 +213,7 @@ def main(argv=None):
     relit = {o: bpy.data.objects[o].material_slots[0].material for o in info.objects}
     n_relit = sum(1 for m in relit.values() if m is not None and m.name.endswith(".relight"))
     n_maps = sum(1 for im in bpy.data.images if im.get("relight_generated"))
-    print(f"precompute: {n_relit}/{len(info.objects)} objects relit, {n_maps} display maps")
+    print(f"precompute: {n_relit}/{len(info.objects)} objects relit, {n_maps} images (T_final and maps)")
 
     # 3. Keyframes and EEVEE frames.
     sched = lamp_schedule(powers0)
