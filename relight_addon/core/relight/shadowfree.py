@@ -78,6 +78,7 @@ SIGNIFICANT_SHARE = 0.05
 # Attenuation above 1 - VIS_TOL counts as fully visible, below VIS_TOL as invisible.
 VIS_TOL = 0.02
 SEAM_PIXELS = 4
+TEXEL_CHUNK = 1 << 15     # texels whose direct light is computed at once (texel mode)
 
 
 @dataclass
@@ -741,47 +742,54 @@ def _texel_irradiance(sol, tm, scene, occluder, opt, scale):
 
     ind_occ = np.stack([per_texel(Hocc_k[j] - Docc_k[j]) for j in range(len(Hocc_k))])
     ind_un = np.stack([per_texel(HU_k[j] - DU_k[j]) for j in range(len(HU_k))])
-    pts, nrm, n_sub = _texel_points(scene, tm, opt.texel_samples)
-    U, O = lamp_irradiance(scene, pts, nrm, occluder, opt.texel_rays, opt.seed + 11, scale)
-    if n_sub > 1:      # mean over each texel's footprint (a photo texel integrates it too)
-        U = U.reshape(-1, n_sub, *U.shape[1:]).mean(axis=1)
-        O = O.reshape(-1, n_sub, *O.shape[1:]).mean(axis=1)
+    # Direct light in chunks of texels: the footprint points and their rays stay bounded
+    # (about 0.3 kB per texel and lamp are kept, whatever the texture size).
+    T, k = tm.n_texels, scene.n_lamps
+    U = np.zeros((T, k, 3))
+    O = np.zeros((T, k, 3))
+    patch, u, v = tm.patch, tm.u, tm.v
+    parts = [im for im in tm.images if len(im)]
+    centre = np.concatenate([im.uv for im in parts]) if parts else np.zeros((0, 2))
+    size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
+                           for im in parts]) if parts else np.zeros((0, 2))
+    for c0 in range(0, T, TEXEL_CHUNK):
+        sl = slice(c0, c0 + TEXEL_CHUNK)
+        pts, nrm, n_sub = _texel_points(scene, patch[sl], u[sl], v[sl], centre[sl], size[sl],
+                                        opt.texel_samples)
+        Uc, Oc = lamp_irradiance(scene, pts, nrm, occluder, opt.texel_rays,
+                                 opt.seed + 11 + c0, scale)
+        # mean over each texel's footprint (a photo texel integrates it too)
+        U[sl] = Uc.reshape(-1, n_sub, k, 3).mean(axis=1)
+        O[sl] = Oc.reshape(-1, n_sub, k, 3).mean(axis=1)
     U, O = np.moveaxis(U, 1, 0), np.moveaxis(O, 1, 0)            # (k, T, 3)
     return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
 
 
-def _texel_points(scene, tm, samples):
-    """3D points (T * samples^2, 3) and normals over each texel's footprint (a samples x
-    samples grid in UV, mapped through the owning patch; points past the patch edge are clamped
-    onto it)."""
-    n = tm.n_texels
-    patch = tm.patch
+def _texel_points(scene, patch, u, v, centre, size, samples):
+    """3D points (t * samples^2, 3) and normals over each texel's footprint (a samples x
+    samples grid in UV around the texel centre ``centre`` (t, 2) of an image of ``size`` (t, 2)
+    texels, mapped through the owning patch; points past the patch edge are clamped onto it).
+    ``u``, ``v``: the patch parameters of the texel centres."""
     normals = scene.area_normal()[1][patch]
-    if samples <= 1 or n == 0:
-        pts = bilinear_point(scene.corners[patch][:, None], tm.u[:, None], tm.v[:, None])[:, 0]
+    if samples <= 1 or len(patch) == 0:
+        pts = bilinear_point(scene.corners[patch][:, None], u[:, None], v[:, None])[:, 0]
         return pts, normals, 1
     from ..texture.mapping import inverse_bilinear, inverse_triangle, uv_patch_is_triangle
     uvc = scene.uv[patch]
-    size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
-                           for im in tm.images if len(im)] or [np.zeros((0, 2))])
-    centre = np.concatenate([im.uv for im in tm.images if len(im)] or [np.zeros((0, 2))])
     g = (np.arange(samples) + 0.5) / samples - 0.5
     off = np.stack(np.meshgrid(g, g, indexing="xy"), -1).reshape(-1, 2)        # (s^2, 2)
-    q = centre[:, None] + off[None] / size[:, None]                              # (T, s^2, 2)
-    q = q.reshape(-1, 2)
-    rep = np.repeat(np.arange(n), len(off))
+    q = (centre[:, None] + off[None] / size[:, None]).reshape(-1, 2)            # (t s^2, 2)
+    rep = np.repeat(np.arange(len(patch)), len(off))
     tri = uv_patch_is_triangle(uvc)[rep]
-    u = np.empty(len(q))
-    v = np.empty(len(q))
+    uu = np.empty(len(q))
+    vv = np.empty(len(q))
     if (~tri).any():
-        uu, vv, _ = inverse_bilinear(uvc[rep[~tri]], q[~tri])
-        u[~tri], v[~tri] = uu, vv
+        uu[~tri], vv[~tri], _ = inverse_bilinear(uvc[rep[~tri]], q[~tri])
     if tri.any():
-        uu, vv, _ = inverse_triangle(uvc[rep[tri]], q[tri])[:3]
-        u[tri], v[tri] = uu, vv
-    u = np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)
-    v = np.clip(np.nan_to_num(v, nan=0.5), 0.0, 1.0)
-    pts = bilinear_point(scene.corners[patch][rep][:, None], u[:, None], v[:, None])[:, 0]
+        uu[tri], vv[tri] = inverse_triangle(uvc[rep[tri]], q[tri])[:2]
+    uu = np.clip(np.nan_to_num(uu, nan=0.5), 0.0, 1.0)
+    vv = np.clip(np.nan_to_num(vv, nan=0.5), 0.0, 1.0)
+    pts = bilinear_point(scene.corners[patch][rep][:, None], uu[:, None], vv[:, None])[:, 0]
     return pts, normals[rep], len(off)
 
 
