@@ -637,3 +637,23 @@ def test_overlay_setting_is_inert_in_background(fresh):
     settings = importlib.import_module(PKG + ".operators.settings")
     assert settings.LAST_RESULT["result"].stats["elements"] == \
         bpy.context.scene["relight_status"]["elements"]
+
+
+@pytest.mark.parametrize("correction", ["ELEMENT", "NONE"])
+def test_other_shadow_removal_modes(correction):
+    """Per-element removal writes a T_final image too; with the correction off T is the
+    original image (the DRB97 baseline) and the maps sum to 1 where lit."""
+    _addon()
+    build_scene()
+    assert bpy.ops.relight.precompute(preset="draft", correction=correction) == {"FINISHED"}
+    mat = bpy.data.materials["Floor_mat.relight"]
+    t_image = mat.node_tree.nodes["T"].image
+    gen = [im for im in bpy.data.images if im.get("relight_generated")]
+    if correction == "NONE":
+        assert t_image.name == "Floor_mat_img" and len(gen) == 7 * len(LAMPS)
+        total = sum(_pixels(im)[..., :3].astype(np.float64) for im in _m_images(mat).values())
+        assert np.all((np.abs(total - 1) < 2e-3) | (total == 0))
+    else:
+        assert t_image.name == "Floor_mat_img.relight.T" and len(gen) == 7 * (len(LAMPS) + 1)
+        assert np.isfinite(_pixels(t_image)).all()
+    assert bpy.context.scene["relight_status"]["correction"] == correction
