@@ -3,7 +3,7 @@
 For every (point, lamp patch) pair: the exact point-to-polygon form factor F (unoccluded), and
 the visible fraction from ``rays`` segments to area-uniform lamp points on a shifted R2
 sequence, weighted by the point-to-point kernel (the ratio estimator of the solver's final
-links).  Irradiance = exitance x F (x visible fraction), summed per lamp.
+links).  The first FIRST_RAYS rays decide: only pairs that see part of the lamp get the rest.  Irradiance = exitance x F (x visible fraction), summed per lamp.
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from ..scene import SceneData, bilinear_point, quad_area_normal
 
 _R2 = (0.7548776662466927, 0.5698402909980532)
 _CHUNK_RAYS = 1 << 20
+FIRST_RAYS = 16
 
 
 def _kernel(n_r, n_s, d):
@@ -22,6 +23,28 @@ def _kernel(n_r, n_s, d):
     cr = np.einsum("ij,ij->i", d, n_r)
     cs = -np.einsum("ij,ij->i", d, n_s)
     return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
+
+
+def _cast(occluder, eps, geo, shift, j0, count):
+    """Rays j0 .. j0 + count - 1 of each (point, lamp patch) pair's shifted R2 sequence:
+    kernel weights of all and of the free rays, and counts of free / blocked rays."""
+    P0, N0, C, NL0 = geo
+    j = np.arange(j0, j0 + count)
+    xu = np.mod(j[None] * _R2[0] + shift[:, :1], 1.0)
+    xv = np.mod(j[None] * _R2[1] + shift[:, 1:], 1.0)
+    u, v = area_uniform_uv(C, xu, xv)
+    Q = bilinear_point(C[:, None], u, v).reshape(-1, 3)
+    P = np.repeat(P0, count, axis=0)
+    NP = np.repeat(N0, count, axis=0)
+    NL = np.repeat(NL0, count, axis=0)
+    w = _kernel(NP, NL, Q - P)
+    blocked = occluder.segments_occluded(P + eps * NP, Q + eps * NL)
+    counted = w > 0
+    w = w.reshape(-1, count)
+    free = (~blocked).reshape(-1, count)
+    return (w.sum(axis=1), (w * free).sum(axis=1),
+            (free & counted.reshape(-1, count)).sum(axis=1),
+            (~free & counted.reshape(-1, count)).sum(axis=1))
 
 
 def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int = 16, seed=0,
@@ -59,21 +82,19 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
         pi, li, F = pi[live], li[live], F[live]
         frac = np.ones(len(F))
         if rays and len(F):
-            j = np.arange(rays)
             shift = rng.random((len(F), 2))
-            xu = np.mod(j[None] * _R2[0] + shift[:, :1], 1.0)
-            xv = np.mod(j[None] * _R2[1] + shift[:, 1:], 1.0)
-            u, v = area_uniform_uv(corners[li], xu, xv)
-            Q = bilinear_point(corners[li][:, None], u, v).reshape(-1, 3)
-            P = np.repeat(pts[pi], rays, axis=0)
-            NP = np.repeat(nrm[pi], rays, axis=0)
-            NL = np.repeat(lamp_normal[li], rays, axis=0)
-            w = _kernel(NP, NL, Q - P)
-            blocked = occluder.segments_occluded(P + eps * NP, Q + eps * NL)
-            w = w.reshape(-1, rays)
-            free = (~blocked).reshape(-1, rays)
-            tried = w.sum(axis=1)
-            frac = np.where(tried > 0, (w * free).sum(axis=1) / np.where(tried > 0, tried, 1.0), 1.0)
+            geo = (pts[pi], nrm[pi], corners[li], lamp_normal[li])
+            # Few rays first; the rest only where they disagree (penumbrae): a point that sees
+            # the whole lamp or none of it with the first rays costs no more.
+            first = min(rays, FIRST_RAYS)
+            w_all, w_free, n_free, n_blocked = _cast(occluder, eps, geo, shift, 0, first)
+            mixed = np.flatnonzero((n_free > 0) & (n_blocked > 0))
+            if rays > first and len(mixed):
+                sub = tuple(g[mixed] for g in geo)
+                w2, f2, _, _ = _cast(occluder, eps, sub, shift[mixed], first, rays - first)
+                w_all[mixed] += w2
+                w_free[mixed] += f2
+            frac = np.where(w_all > 0, w_free / np.where(w_all > 0, w_all, 1.0), 1.0)
         gi = start + pi
         contrib = F[:, None] * exitance[li]
         kk = lamp_k[li]

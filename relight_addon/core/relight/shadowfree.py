@@ -231,6 +231,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
                 progress=None) -> ShadowFreeResult:
     """Shadow-free texture T_final and per-lamp display maps M_k (see the module docstring)."""
     opt = options or ShadowFreeOptions()
+    cache = {}              # direct light per texel, cast once (see _texel_direct)
     if opt.mode not in ("element", "texel", "none"):
         raise ValueError(f"unknown mode {opt.mode!r}")
     if scene.n_lamps == 0:
@@ -279,7 +280,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     sol = solve_radiosity(scene1, opt.preset, occluder=occluder, seed=opt.seed,
                           progress=sub_progress(0.05, 0.4))
     stage(0.4, "Lamp exitances and reflectances")
-    fit = _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder)
+    fit = _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache)
     scale_k, eq_k, nnls_k, rho_leaf = fit
     misfit = photo_misfit(sol, tm, photo, textured)
 
@@ -298,7 +299,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
 
     if opt.mode == "texel":
         stage(0.6, "Per-texel irradiance")
-        Hocc_k, HU_k = _texel_irradiance(sol, tm, scene, occluder, opt, scale_k)
+        Hocc_k, HU_k = _texel_irradiance(sol, tm, scene, occluder, opt, scale_k, cache)
         Hocc = Hocc_k.sum(axis=0)
         # Removing occlusion never darkens (E-bar >= 0; sampling noise could say otherwise).
         factor = _ratio(HU_k.sum(axis=0), Hocc, fmin=1.0)
@@ -404,7 +405,7 @@ def _leaf_photo(sol, tm, values):
     return means[sol.leaves], counts[sol.leaves]
 
 
-def _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder):
+def _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache):
     """Exitance factors (photo units per scene unit) by eq 4.2, by NNLS and by the shadow-edge
     fit; then per-leaf albedo rounds.  Returns (scale used, eq 4.2, NNLS, rho_leaf)."""
     scene = sol.scene
@@ -429,7 +430,7 @@ def _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder):
         scale = (nnls_k if np.any(nnls_k > 0) else eq_k).copy()
         rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
         for _ in range(2):
-            scale = _edge_fit(sol, tm, photo, occluder, opt, scale)
+            scale = _edge_fit(sol, tm, photo, occluder, opt, scale, cache)
             rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
         return scale, eq_k, nnls_k, rho_leaf
     rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
@@ -454,7 +455,7 @@ def _texel_pairs(tm):
     return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
 
 
-def _edge_fit(sol, tm, photo, occluder, opt, scale):
+def _edge_fit(sol, tm, photo, occluder, opt, scale, cache):
     """Relative lamp exitances that make the reflectance photo / irradiance smoothest.
 
     Reflectance does not know where shadows fall: with the right exitance ratios the photo's
@@ -467,7 +468,7 @@ def _edge_fit(sol, tm, photo, occluder, opt, scale):
     k = len(scale)
     if k < 2 or tm.n_texels == 0:
         return scale
-    Hocc_k, _ = _texel_irradiance(sol, tm, sol.scene, occluder, opt, scale)
+    Hocc_k, _ = _texel_irradiance(sol, tm, sol.scene, occluder, opt, scale, cache)
     H = _lum(Hocc_k)                                                  # (k, T)
     pairs = _texel_pairs(tm)
     t_lum = _lum(photo)
@@ -727,7 +728,7 @@ def _maps_from(Hocc_k, HU):
     return np.where(lit[None], np.maximum(Hocc_k, 0.0) / np.where(lit, HU, 1.0)[None], 0.0)
 
 
-def _texel_irradiance(sol, tm, scene, occluder, opt, scale):
+def _texel_irradiance(sol, tm, scene, occluder, opt, scale, cache):
     """(Hocc_k, HU_k) per texel (k, T, 3): direct by ray casting, indirect interpolated."""
     h = sol.hierarchy
     tr = _Transport(sol)
@@ -742,8 +743,21 @@ def _texel_irradiance(sol, tm, scene, occluder, opt, scale):
 
     ind_occ = np.stack([per_texel(Hocc_k[j] - Docc_k[j]) for j in range(len(Hocc_k))])
     ind_un = np.stack([per_texel(HU_k[j] - DU_k[j]) for j in range(len(HU_k))])
-    # Direct light in chunks of texels: the footprint points and their rays stay bounded
-    # (about 0.3 kB per texel and lamp are kept, whatever the texture size).
+    U1, O1 = _texel_direct(scene, tm, occluder, opt, cache)
+    scale = np.asarray(scale, float)[None, :, None]
+    U, O = U1 * scale, O1 * scale
+    U, O = np.moveaxis(U, 1, 0), np.moveaxis(O, 1, 0)            # (k, T, 3)
+    return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
+
+
+def _texel_direct(scene, tm, occluder, opt, cache):
+    """Direct irradiance (T, k, 3) from each lamp at unit exitance factor, unoccluded and with
+    visibility, averaged over each texel's footprint.  Linear in the exitances, so it is cast
+    once per (scene, texel map) and scaled afterwards (the shadow-edge fit and the maps reuse
+    it); computed in chunks of texels so that the footprint points and their rays stay bounded
+    (about 0.3 kB per texel and lamp are kept, whatever the texture size)."""
+    if "direct" in cache:
+        return cache["direct"]
     T, k = tm.n_texels, scene.n_lamps
     U = np.zeros((T, k, 3))
     O = np.zeros((T, k, 3))
@@ -756,13 +770,12 @@ def _texel_irradiance(sol, tm, scene, occluder, opt, scale):
         sl = slice(c0, c0 + TEXEL_CHUNK)
         pts, nrm, n_sub = _texel_points(scene, patch[sl], u[sl], v[sl], centre[sl], size[sl],
                                         opt.texel_samples)
-        Uc, Oc = lamp_irradiance(scene, pts, nrm, occluder, opt.texel_rays,
-                                 opt.seed + 11 + c0, scale)
+        Uc, Oc = lamp_irradiance(scene, pts, nrm, occluder, opt.texel_rays, opt.seed + 11 + c0)
         # mean over each texel's footprint (a photo texel integrates it too)
         U[sl] = Uc.reshape(-1, n_sub, k, 3).mean(axis=1)
         O[sl] = Oc.reshape(-1, n_sub, k, 3).mean(axis=1)
-    U, O = np.moveaxis(U, 1, 0), np.moveaxis(O, 1, 0)            # (k, T, 3)
-    return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
+    cache["direct"] = (U, O)
+    return U, O
 
 
 def _texel_points(scene, patch, u, v, centre, size, samples):
