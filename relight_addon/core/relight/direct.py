@@ -11,18 +11,11 @@ import numpy as np
 
 from ..geometry.formfactor import point_to_polygon
 from ..geometry.sampling import area_uniform_uv
+from ..radiosity.links import _R2, _kernel
 from ..scene import SceneData, bilinear_point, quad_area_normal
 
-_R2 = (0.7548776662466927, 0.5698402909980532)
 _CHUNK_RAYS = 1 << 20
 FIRST_RAYS = 16
-
-
-def _kernel(n_r, n_s, d):
-    dd = np.einsum("ij,ij->i", d, d)
-    cr = np.einsum("ij,ij->i", d, n_r)
-    cs = -np.einsum("ij,ij->i", d, n_s)
-    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
 
 
 def _cast(occluder, eps, geo, shift, j0, count):

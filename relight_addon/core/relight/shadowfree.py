@@ -194,6 +194,13 @@ def _neighbour_pairs(tm, elem):
     return np.unique(np.stack([np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])], 1), axis=0)
 
 
+def _patch_means(tm, values, n_patches):
+    """Mean texel value (p, 3) and texel count (p,) of every patch."""
+    cnt = np.bincount(tm.patch, minlength=n_patches)
+    means = np.stack([np.bincount(tm.patch, values[:, c], n_patches) for c in range(3)], axis=1)
+    return means / np.maximum(cnt, 1)[:, None], cnt
+
+
 def _lab_of(values, white):
     return linear_rgb_to_lab(np.clip(np.nan_to_num(values) / max(white, 1e-300), 0.0, None))
 
@@ -254,13 +261,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
 
     # 1. Initialisation: eq 4.1 per patch, first solution, exitances, per-leaf albedo.
     stage(0.02, "Estimating reflectances (eq 4.1)")
-    patch_mean = np.zeros((scene.n_patches, 3))
-    if len(photo):
-        cnt = np.bincount(tm.patch, minlength=scene.n_patches)
-        for c in range(3):
-            patch_mean[:, c] = np.bincount(tm.patch, photo[:, c], scene.n_patches)
-        patch_mean /= np.maximum(cnt, 1)[:, None]
-        textured &= cnt > 0
+    patch_mean, cnt = _patch_means(tm, photo, scene.n_patches)
+    textured &= cnt > 0
     lamp_patch = scene.lamp >= 0
     est_ids = np.flatnonzero(textured & ~lamp_patch)
     rho_patch = scene.rho.copy()
@@ -318,14 +320,10 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stage(0.6, "Blocked irradiance and T_inter (eq 4.5, 4.6)")
     tr = _Transport(sol)
     Hocc_k, HU_k, Docc_k, DU_k = tr.irradiance(sol.basis)
-    h = sol.hierarchy
-    leaves = sol.leaves
-    elem = texel_elements(h, tm)
+    elem = texel_elements(sol.hierarchy, tm)
 
-    def per_texel(leaf_vals):
-        full = np.zeros((h.n,) + leaf_vals.shape[1:])
-        full[leaves] = leaf_vals
-        return vertex_interpolate(h, full, tm, elem)
+    def per_texel(leaf_vals):          # smooth per-texel values of the current solution
+        return vertex_interpolate(sol.hierarchy, leaf_vals, tm, elem)
 
     HU_t = per_texel(HU_k.sum(0))
     Hocc_t = per_texel(Hocc_k.sum(0))
@@ -346,10 +344,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     # 5. Fresh solution on T_final: B with visibility, D from its unoccluded gather.
     stage(0.75, "Fresh solution on T_final")
     first = sol
-    pm = np.zeros((scene.n_patches, 3))
-    for c in range(3):
-        pm[:, c] = np.bincount(tm.patch, t_final[:, c], scene.n_patches)
-    pm /= np.maximum(np.bincount(tm.patch, minlength=scene.n_patches), 1)[:, None]
+    pm, _ = _patch_means(tm, t_final, scene.n_patches)
     rho2 = scene.rho.copy()
     if len(est_ids):
         rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], opt.rho_mean).rho
@@ -362,8 +357,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stage(0.92, "Display maps")
     tr = _Transport(sol)
     Hocc_k, HU_k, _, _ = tr.irradiance(sol.basis)
-    h, leaves = sol.hierarchy, sol.leaves
-    elem = texel_elements(h, tm)
+    elem = texel_elements(sol.hierarchy, tm)
     Hocc_kt = np.stack([per_texel(x) for x in Hocc_k])
     maps = _maps_from(Hocc_kt, per_texel(HU_k.sum(0)))
     tex, mp, cov = _to_images(tm, t_final, maps, scene)
@@ -516,7 +510,7 @@ def _albedo_rounds(sol, tm, values, textured, lamp_patch, opt, scale, unoccluded
     patch = sol.system.patch
     use = textured[patch] & ~lamp_patch[patch] & (counts > 0)
     a = sol.system.leaf_area
-    rho = sol.system.rho.copy() if sol.system.rho.shape == (len(patch), 3) else sol.scene.rho[patch].copy()
+    rho = sol.system.rho.copy()
     solve_basis(sol, rho, scale)
     for _ in range(max(opt.albedo_rounds, 1)):
         g = _Transport(sol).unocc if unoccluded else sol.system
@@ -730,19 +724,12 @@ def _maps_from(Hocc_k, HU):
 
 def _texel_irradiance(sol, tm, scene, occluder, opt, scale, cache):
     """(Hocc_k, HU_k) per texel (k, T, 3): direct by ray casting, indirect interpolated."""
-    h = sol.hierarchy
-    tr = _Transport(sol)
-    Hocc_k, HU_k, Docc_k, DU_k = tr.irradiance(sol.basis)
-    elem = texel_elements(h, tm)
-    leaves = sol.leaves
-
-    def per_texel(v):
-        full = np.zeros((h.n, 3))
-        full[leaves] = v
-        return vertex_interpolate(h, full, tm, elem)
-
-    ind_occ = np.stack([per_texel(Hocc_k[j] - Docc_k[j]) for j in range(len(Hocc_k))])
-    ind_un = np.stack([per_texel(HU_k[j] - DU_k[j]) for j in range(len(HU_k))])
+    Hocc_k, HU_k, Docc_k, DU_k = _Transport(sol).irradiance(sol.basis)
+    elem = texel_elements(sol.hierarchy, tm)
+    ind_occ = np.stack([vertex_interpolate(sol.hierarchy, o - d, tm, elem)
+                        for o, d in zip(Hocc_k, Docc_k)])
+    ind_un = np.stack([vertex_interpolate(sol.hierarchy, u - d, tm, elem)
+                       for u, d in zip(HU_k, DU_k)])
     U1, O1 = _texel_direct(scene, tm, occluder, opt, cache)
     scale = np.asarray(scale, float)[None, :, None]
     U, O = U1 * scale, O1 * scale
@@ -808,15 +795,9 @@ def _texel_points(scene, patch, u, v, centre, size, samples):
 
 def _drb97_maps(sol, tm, photo, scene):
     """Texture correction off: T = photo, M_k = B_k / sum_k B_k, vertex-interpolated."""
-    h = sol.hierarchy
-    elem = texel_elements(h, tm)
-    leaves = sol.leaves
-    per = []
-    for j in range(len(sol.basis)):
-        full = np.zeros((h.n, 3))
-        full[leaves] = np.maximum(sol.basis[j], 0.0)
-        per.append(vertex_interpolate(h, full, tm, elem))
-    Bk = np.stack(per)
+    elem = texel_elements(sol.hierarchy, tm)
+    Bk = np.stack([vertex_interpolate(sol.hierarchy, np.maximum(b, 0.0), tm, elem)
+                   for b in sol.basis])
     return _to_images(tm, photo, _maps_from(Bk, Bk.sum(axis=0)), scene)
 
 
