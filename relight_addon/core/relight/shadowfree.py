@@ -757,10 +757,9 @@ def _texel_direct(scene, tm, occluder, opt, cache):
         sl = slice(c0, c0 + TEXEL_CHUNK)
         pts, nrm, n_sub = _texel_points(scene, patch[sl], u[sl], v[sl], centre[sl], size[sl],
                                         opt.texel_samples)
-        Uc, Oc = lamp_irradiance(scene, pts, nrm, occluder, opt.texel_rays, opt.seed + 11 + c0)
-        # mean over each texel's footprint (a photo texel integrates it too)
-        U[sl] = Uc.reshape(-1, n_sub, k, 3).mean(axis=1)
-        O[sl] = Oc.reshape(-1, n_sub, k, 3).mean(axis=1)
+        # the mean over each texel's footprint (a photo texel integrates it too)
+        U[sl], O[sl] = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub], occluder,
+                                       opt.texel_rays, opt.seed + 11 + c0)
     cache["direct"] = (U, O)
     return U, O
 
