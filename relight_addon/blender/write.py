@@ -5,8 +5,8 @@
 ``result`` is a :class:`~relight_addon.core.relight.shadowfree.ShadowFreeResult`: per image the
 shadow-free texture ``T_final`` and one display map ``M_k`` per lamp, so that the relit colour is
 ``T_final * sum_k I_k M_k`` (per-texel or per-element shadow removal; with the correction off,
-the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``).  A bare
-RadiositySolution is accepted too (correction off, maps from :func:`display_maps`).
+the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, the maps that
+:func:`display_maps` also gives for a bare RadiositySolution).
 
 * ``T_final`` is written as ``"<image>.relight.T"`` (half float, Non-Color = linear, unclamped
   above 1, packed) and replaces the image of the relit material's copy of the texture node
@@ -42,14 +42,12 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
-from ..core.texture.mapping import (TexelMap, dilate_seams, interpolate_corner_values,
-                                    rasterize_patches, texel_elements, vertex_values)
+from ..core.relight.shadowfree import DISPLAY_EPS, SEAM_PIXELS, map_images, ratio_maps
+from ..core.texture.mapping import rasterize_patches
 
 GENERATED = "relight_generated"
 ORIGINALS = "relight_original_materials"
 POWER0 = "relight_power0"
-DISPLAY_EPS = 1e-6     # D is floored at DISPLAY_EPS * max(D); below it M_k = 0
-SEAM_PIXELS = 4
 HALF_MAX = 65504.0
 T_NODE = "T"
 MAT_SUFFIX = ".relight"
@@ -59,57 +57,23 @@ _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 # -- maths (numpy only) ------------------------------------------------------------------------
 
 def display_maps(scene_data, solution, seam_pixels=SEAM_PIXELS, eps=DISPLAY_EPS, warnings=None):
-    """Per image used by some patch: ``(coverage (H, W) bool, maps (k, H, W, 3) float32)``.
-
-    Returns ``{image index: (coverage, maps)}``; ``maps[k] = B_k / D`` (0 where D < floor),
-    dilated across seams.  Overlapping UVs (a texel claimed by several faces: it can show one
-    face's light only) are appended to ``warnings`` when a list is given.
-    """
-    h = solution.hierarchy
-    basis = np.maximum(np.asarray(solution.basis, np.float64), 0.0)   # (k, L, 3)
-    k = basis.shape[0]
+    """Texture correction off (DRB97): per image used by some patch ``(coverage (H, W) bool,
+    maps (k, H, W, 3) float32)`` with ``maps[k] = B_k / D`` (0 where D < floor), dilated across
+    seams (core/relight/shadowfree.py ratio_maps and map_images).  Overlapping UVs (a texel
+    claimed by several faces: it can show one face's light only) are appended to ``warnings``
+    when a list is given."""
     shapes = [im.texels.shape[:2] for im in scene_data.images]
     tm = rasterize_patches(scene_data.uv, scene_data.image, shapes)
-    elem = texel_elements(h, tm)
-    leaves = np.asarray(solution.leaves)
-    corners = []
-    for j in range(k):
-        vals = np.zeros((h.n, 3))
-        vals[leaves] = basis[j]
-        corners.append(vertex_values(h, vals))
-    off = tm.offsets
-    used = [i for i in range(len(tm)) if len(tm[i])]
     if warnings is not None:
-        for i in used:
-            if tm[i].n_overlap:
-                warnings.append(f"Image '{scene_data.images[i].name}': {tm[i].n_overlap} texel(s) "
-                                "are used by several faces (overlapping UVs); they show the "
-                                "light of one face only")
-    per_image = {}
-    d_max = np.zeros(3)
-    for i in used:
-        sub = TexelMap([tm[i]])
-        b = np.stack([interpolate_corner_values(h, c, sub, elem[off[i]:off[i + 1]]) for c in corners])
-        b = np.maximum(b, 0.0)
-        per_image[i] = b
-        d_max = np.maximum(d_max, b.sum(axis=0).max(axis=0))
-    floor = np.maximum(eps * d_max, 1e-300)
-    out = {}
-    for i in used:
-        b = per_image.pop(i)
-        d = b.sum(axis=0)                                  # (t, 3)
-        lit = d >= floor
-        m = np.where(lit, b / np.where(lit, d, 1.0), 0.0)  # (k, t, 3)
-        im = tm[i]
-        hh, ww = im.shape
-        maps = np.zeros((k, hh, ww, 3), np.float32)
-        for j in range(k):
-            full = np.zeros((hh * ww, 3), np.float32)
-            full[im.texel_index] = m[j]
-            img, _ = dilate_seams(full.reshape(hh, ww, 3), im.coverage, seam_pixels)
-            maps[j] = img
-        out[i] = (im.coverage.copy(), maps)
-    return out
+        warnings.extend(_overlap_warnings(scene_data, tm))
+    maps, coverage = map_images(tm, ratio_maps(solution, tm, eps), seam_pixels)
+    return {i: (coverage[i], maps[i]) for i in maps}
+
+
+def _overlap_warnings(scene_data, tm):
+    return [f"Image '{scene_data.images[i].name}': {im.n_overlap} texel(s) are used by several "
+            "faces (overlapping UVs); they show the light of one face only"
+            for i, im in enumerate(tm.images) if im.n_overlap]
 
 
 # -- bpy helpers -------------------------------------------------------------------------------
@@ -380,8 +344,7 @@ def write_results(context, scene_data, report, solution) -> dict:
     """Write the display maps and relit materials; replaces a previous result (clear first).
 
     ``solution``: a ShadowFreeResult (T_final and M_k per image; T_final is written as
-    ``"<image>.relight.T"`` unless the correction was off) or a bare RadiositySolution (texture
-    correction off, maps by :func:`display_maps`).
+    ``"<image>.relight.T"`` unless the correction was off).
     Returns a summary dict (images, materials, objects, lamps, skipped, warnings)."""
     warnings = []
     clear_relight_data(context)
@@ -435,18 +398,9 @@ def write_results(context, scene_data, report, solution) -> dict:
             mat_image.pop(mat_name, None)
     used_images = set(mat_image.values())
 
-    textures = {}
-    if hasattr(solution, "maps"):
-        maps = {i: (solution.coverage[i], solution.maps[i]) for i in solution.maps}
-        if solution.options.mode != "none":
-            textures = solution.texture
-        for i, im in enumerate(solution.texel_map.images):
-            if im.n_overlap:
-                warnings.append(f"Image '{scene_data.images[i].name}': {im.n_overlap} texel(s) "
-                                "are used by several faces (overlapping UVs); they show the "
-                                "light of one face only")
-    else:
-        maps = display_maps(scene_data, solution, warnings=warnings)
+    maps = {i: (solution.coverage[i], solution.maps[i]) for i in solution.maps}
+    textures = solution.texture if solution.options.mode != "none" else {}
+    warnings.extend(_overlap_warnings(scene_data, solution.texel_map))
 
     # Images, one per (used image, lamp).
     made_images, t_images = {}, {}

@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..radiosity.links import INVISIBLE, PARTIAL, VISIBLE
-from ..radiosity.precompute import _lamp_emission, regather, solve_basis, solve_radiosity
+from ..radiosity.precompute import regather, solve_basis, solve_radiosity
 from ..radiosity.presets import get_preset
 from ..radiosity.solver import LeafSystem
 from ..scene import SceneData, bilinear_point
@@ -283,7 +283,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
                           progress=sub_progress(0.05, 0.4))
     stage(0.4, "Lamp exitances and reflectances")
     fit = _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache)
-    scale_k, eq_k, nnls_k, rho_leaf = fit
+    scale_k, eq_k, nnls_k = fit
     misfit = photo_misfit(sol, tm, photo, textured)
 
     if opt.mode == "none":
@@ -297,7 +297,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         stage(0.45, "Texture-based refinement")
         _refine_by_texture(sol, tm, photo, white, occluder, opt, scale_k)
         regather(sol, opt.seed + 1)
-        rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale_k)
+        _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale_k)
 
     if opt.mode == "texel":
         stage(0.6, "Per-texel irradiance")
@@ -401,7 +401,8 @@ def _leaf_photo(sol, tm, values):
 
 def _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache):
     """Exitance factors (photo units per scene unit) by eq 4.2, by NNLS and by the shadow-edge
-    fit; then per-leaf albedo rounds.  Returns (scale used, eq 4.2, NNLS, rho_leaf)."""
+    fit; then per-leaf albedo rounds (the basis is solved with them).  Returns (scale used,
+    eq 4.2, NNLS)."""
     scene = sol.scene
     k = scene.n_lamps
     lum_emission = _lum(scene.emission)
@@ -422,13 +423,13 @@ def _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache):
         scale = eq_k.copy()
     else:   # "edges"
         scale = (nnls_k if np.any(nnls_k > 0) else eq_k).copy()
-        rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
+        _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
         for _ in range(2):
             scale = _edge_fit(sol, tm, photo, occluder, opt, scale, cache)
-            rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
-        return scale, eq_k, nnls_k, rho_leaf
-    rho_leaf = _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
-    return scale, eq_k, nnls_k, rho_leaf
+            _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
+        return scale, eq_k, nnls_k
+    _albedo_rounds(sol, tm, photo, textured, lamp_patch, opt, scale)
+    return scale, eq_k, nnls_k
 
 
 def _texel_pairs(tm):
@@ -714,10 +715,11 @@ def _reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, op
 
 # -- step 5 / texel mode: maps -------------------------------------------------------------------
 
-def _maps_from(Hocc_k, HU):
-    """M_k = H_occ,k / H_unocc per texel; 0 where H_unocc is below DISPLAY_EPS of its max."""
+def _maps_from(Hocc_k, HU, eps=DISPLAY_EPS):
+    """M_k = H_occ,k / H_unocc per texel; 0 where H_unocc is below ``eps`` of its max (per
+    channel, over every texel)."""
     HU = np.maximum(HU, 0.0)
-    floor = np.maximum(DISPLAY_EPS * HU.max(axis=0, initial=0.0), 1e-300)
+    floor = np.maximum(eps * HU.max(axis=0, initial=0.0), 1e-300)
     lit = HU >= floor
     return np.where(lit[None], np.maximum(Hocc_k, 0.0) / np.where(lit, HU, 1.0)[None], 0.0)
 
@@ -792,16 +794,24 @@ def _texel_points(scene, patch, u, v, centre, size, samples):
     return pts, normals[rep], len(off)
 
 
-def _drb97_maps(sol, tm, photo, scene):
-    """Texture correction off: T = photo, M_k = B_k / sum_k B_k, vertex-interpolated."""
+def ratio_maps(sol, tm, eps=DISPLAY_EPS):
+    """The DRB97 display maps (texture correction off): M_k = B_k / sum_k B_k per texel (k, T, 3),
+    from vertex-interpolated leaf radiosity; 0 below the floor (see _maps_from)."""
     elem = texel_elements(sol.hierarchy, tm)
     Bk = np.stack([vertex_interpolate(sol.hierarchy, np.maximum(b, 0.0), tm, elem)
                    for b in sol.basis])
-    return _to_images(tm, photo, _maps_from(Bk, Bk.sum(axis=0)), scene)
+    return _maps_from(Bk, Bk.sum(axis=0), eps)
 
 
-def _to_images(tm, t_final, maps, scene):
-    tex, mp, cov = {}, {}, {}
+def _drb97_maps(sol, tm, photo, scene):
+    """Texture correction off: T = photo, M_k = B_k / sum_k B_k."""
+    return _to_images(tm, photo, ratio_maps(sol, tm), scene)
+
+
+def map_images(tm, maps, seam_pixels=SEAM_PIXELS):
+    """Per-texel maps (k, T, 3) -> {image index: (k, H, W, 3) float32}, dilated across seams,
+    and {image index: coverage (H, W)}, for every image with covered texels."""
+    mp, cov = {}, {}
     off = tm.offsets
     k = len(maps)
     for i, im in enumerate(tm.images):
@@ -809,15 +819,27 @@ def _to_images(tm, t_final, maps, scene):
             continue
         hh, ww = im.shape
         sl = slice(off[i], off[i + 1])
-        base = _texels(scene.images[i]).reshape(hh * ww, 3).copy()
-        base[im.texel_index] = t_final[sl]
-        t_img, _ = dilate_seams(base.reshape(hh, ww, 3), im.coverage, SEAM_PIXELS)
-        tex[i] = np.nan_to_num(t_img).astype(np.float32)
         m = np.zeros((k, hh, ww, 3), np.float32)
         for j in range(k):
             full = np.zeros((hh * ww, 3), np.float32)
             full[im.texel_index] = maps[j][sl]
-            m[j], _ = dilate_seams(full.reshape(hh, ww, 3), im.coverage, SEAM_PIXELS)
+            m[j], _ = dilate_seams(full.reshape(hh, ww, 3), im.coverage, seam_pixels)
         mp[i] = np.nan_to_num(m)
         cov[i] = im.coverage.copy()
+    return mp, cov
+
+
+def _to_images(tm, t_final, maps, scene):
+    """T_final per image (the original texels outside the covered ones, dilated) and the maps."""
+    tex = {}
+    off = tm.offsets
+    for i, im in enumerate(tm.images):
+        if len(im) == 0:
+            continue
+        hh, ww = im.shape
+        base = _texels(scene.images[i]).reshape(hh * ww, 3).copy()
+        base[im.texel_index] = t_final[off[i]:off[i + 1]]
+        t_img, _ = dilate_seams(base.reshape(hh, ww, 3), im.coverage, SEAM_PIXELS)
+        tex[i] = np.nan_to_num(t_img).astype(np.float32)
+    mp, cov = map_images(tm, maps)
     return tex, mp, cov
