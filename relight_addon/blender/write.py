@@ -398,7 +398,6 @@ def write_results(context, scene_data, report, solution) -> dict:
             mat_image.pop(mat_name, None)
     used_images = set(mat_image.values())
 
-    maps = {i: (solution.coverage[i], solution.maps[i]) for i in solution.maps}
     textures = solution.texture if solution.options.mode != "none" else {}
     warnings.extend(_overlap_warnings(scene_data, solution.texel_map))
 
@@ -406,7 +405,7 @@ def write_results(context, scene_data, report, solution) -> dict:
     made_images, t_images = {}, {}
     writer = _HalfWriter()
     try:
-        for i, (coverage, m) in maps.items():
+        for i, m in solution.maps.items():
             if i not in used_images:
                 continue
             src = scene_data.images[i].name
