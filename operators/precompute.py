@@ -15,7 +15,7 @@ import threading
 import time
 
 import bpy
-from bpy.props import EnumProperty
+from bpy.props import BoolProperty, EnumProperty
 
 from .settings import CORRECTION_ITEMS, LAST_RESULT, PRESET_ITEMS, store_status, update_overlay
 
@@ -27,11 +27,20 @@ def _modules():
     return read, write, precompute
 
 
-def run_precompute(data, preset, correction="TEXEL", progress=None):
+def run_precompute(data, preset, correction="TEXEL", progress=None, reuse=None):
     """The bpy-free precompute: shadow-free textures and per-lamp display maps."""
     from ..relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
     options = ShadowFreeOptions(mode=correction.lower(), preset=preset)
-    return shadow_free(data, options, progress=progress)
+    return shadow_free(data, options, progress=progress, reuse=reuse)
+
+
+def reusable_solution(preset, correction):
+    """The last run's radiosity solution when Update may keep its mesh and links."""
+    result = LAST_RESULT.get("result")
+    if result is None or correction == "ELEMENT" or result.options.preset != preset \
+            or result.options.mode == "element":
+        return None
+    return result.solution
 
 
 def read_for_precompute(context):
@@ -68,10 +77,11 @@ def memory_error(context, data, preset):
 class SolveJob:
     """The radiosity solve in a worker thread. ``state``: running / done / cancelled / failed."""
 
-    def __init__(self, scene_data, preset, correction="TEXEL"):
+    def __init__(self, scene_data, preset, correction="TEXEL", reuse=None):
         self.scene_data = scene_data
         self.preset = preset
         self.correction = correction
+        self.reuse = reuse
         self.fraction = 0.0
         self.message = "Starting"
         self.result = None
@@ -102,7 +112,7 @@ class SolveJob:
         _, _, precompute = _modules()
         try:
             self.result = run_precompute(self.scene_data, self.preset, self.correction,
-                                         progress=self._progress)
+                                         progress=self._progress, reuse=self.reuse)
             self.state = "cancelled" if self._cancel.is_set() else "done"
         except precompute.Cancelled:
             self.state = "cancelled"
@@ -123,6 +133,9 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
     correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
+    reuse_solution: BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'},
+                                 description="Keep the last run's radiosity mesh and links (set "
+                                             "by Update when only the photos changed)")
 
     _timer = None
     _job = None
@@ -137,7 +150,7 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
         if hasattr(solution, "stats"):
             from ..relight_addon.core.scene import scene_fingerprint
             store_status(context.scene, solution, time.perf_counter() - self._t0, self.correction,
-                         scene_fingerprint(data))
+                         scene_fingerprint(data), scene_fingerprint(data, textures=False))
             LAST_RESULT["result"] = solution
             settings = getattr(context.scene, "relight", None)
             if settings is not None:
@@ -155,8 +168,9 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
         if error:
             self.report({'ERROR'}, error)
             return {'CANCELLED'}
+        reuse = reusable_solution(self.preset, self.correction) if self.reuse_solution else None
         try:
-            solution = run_precompute(data, self.preset, self.correction)
+            solution = run_precompute(data, self.preset, self.correction, reuse=reuse)
         except Exception as ex:
             self.report({'ERROR'}, f"Relight precompute failed: {type(ex).__name__}: {ex}")
             return {'CANCELLED'}
@@ -172,7 +186,8 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             self.report({'ERROR'}, error)
             return {'CANCELLED'}
         self._data, self._read_report = data, read_report
-        self._job = SolveJob(data, self.preset, self.correction).start()
+        reuse = reusable_solution(self.preset, self.correction) if self.reuse_solution else None
+        self._job = SolveJob(data, self.preset, self.correction, reuse).start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 100)
@@ -244,8 +259,9 @@ class RELIGHT_OT_clear(bpy.types.Operator):
 
 
 class RELIGHT_OT_update(bpy.types.Operator):
-    """Re-run the precompute if the scene changed since the last one (geometry, UVs, textures,
-    lamp positions, sizes or colours, quality settings); lamp powers need no update"""
+    """Re-run the precompute if the scene changed since the last one: nothing to do when only
+    lamp powers changed; the radiosity mesh and links are kept when only the photos changed;
+    everything is recomputed after geometry, lamp or quality changes"""
 
     bl_idname = "relight.update"
     bl_label = "Update"
@@ -263,6 +279,7 @@ class RELIGHT_OT_update(bpy.types.Operator):
         _, write, _ = _modules()
         settings = context.scene.relight
         st = status(context.scene)
+        reuse = False
         if st and write.has_relight_data() and st.get("preset") == settings.preset \
                 and st.get("correction") == settings.correction:
             data, _, error = read_for_precompute(context)
@@ -270,8 +287,10 @@ class RELIGHT_OT_update(bpy.types.Operator):
                 self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
                                       "precompute)")
                 return {'FINISHED'}
+            reuse = (error is None and st.get("geometry") == scene_fingerprint(data, False)
+                     and reusable_solution(settings.preset, settings.correction) is not None)
         return bpy.ops.relight.precompute(how, preset=settings.preset,
-                                          correction=settings.correction)
+                                          correction=settings.correction, reuse_solution=reuse)
 
 
 classes = (RELIGHT_OT_precompute, RELIGHT_OT_update, RELIGHT_OT_restore, RELIGHT_OT_clear)

@@ -83,7 +83,7 @@ def status(scene):
     return st.to_dict() if hasattr(st, "to_dict") else st
 
 
-def store_status(scene, result, seconds, correction, fingerprint=""):
+def store_status(scene, result, seconds, correction, fingerprint="", geometry=""):
     """Write what the panel shows: counts, time, model misfit, lamps and their exitances (and
     the scene fingerprint that Update compares)."""
     stats = result.stats
@@ -95,7 +95,7 @@ def store_status(scene, result, seconds, correction, fingerprint=""):
         "seconds": float(seconds), "misfit": float(stats.get("photo_misfit", float("nan"))),
         "lamps": list(result.solution.scene.lamp_names),
         "exitance_scale": scale, "relative_exitance": [s / mean for s in scale],
-        "fingerprint": fingerprint,
+        "fingerprint": fingerprint, "geometry": geometry,
     }
 
 

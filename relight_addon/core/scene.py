@@ -207,10 +207,12 @@ def quads_from_boxes(center, size) -> np.ndarray:
     ])
 
 
-def scene_fingerprint(data: SceneData) -> str:
+def scene_fingerprint(data: SceneData, textures: bool = True) -> str:
     """A hash of everything a precompute depends on: geometry, UVs, reflectances, textures,
     which patches emit, block rays and belong together, and each lamp's colour, but not the
-    lamps' powers (the relit materials follow those through their drivers)."""
+    lamps' powers (the relit materials follow those through their drivers).  Without
+    ``textures``: only what the radiosity mesh and links depend on (no images, reflectances
+    or UVs)."""
     import hashlib
     h = hashlib.sha256()
     emission = np.asarray(data.emission, np.float64)
@@ -220,14 +222,15 @@ def scene_fingerprint(data: SceneData) -> str:
         peak = emission[sel].max() if sel.any() else 0.0
         if peak > 0:
             colour[sel] = emission[sel] / peak
-    arrays = [data.corners, data.rho, colour, data.lamp, data.occluder, data.group]
-    arrays += [a for a in (data.uv, data.image) if a is not None]
+    arrays = [data.corners, colour, data.lamp, data.occluder, data.group]
+    if textures:
+        arrays += [data.rho] + [a for a in (data.uv, data.image) if a is not None]
     for a in arrays:
         a = np.ascontiguousarray(a)
         h.update(str((a.dtype, a.shape)).encode())
         h.update(a.tobytes())
     h.update(repr(list(data.lamp_names)).encode())
-    for im in data.images:
+    for im in (data.images if textures else ()):
         tex = np.ascontiguousarray(getattr(im, "texels", im))
         h.update(str(tex.shape).encode())
         h.update(tex.tobytes())

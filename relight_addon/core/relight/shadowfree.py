@@ -54,6 +54,7 @@ Floors (no NaN or Inf ever reaches a texture; textures stay linear and unclamped
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -235,8 +236,12 @@ class _Stage:
 
 
 def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occluder="auto",
-                progress=None) -> ShadowFreeResult:
-    """Shadow-free texture T_final and per-lamp display maps M_k (see the module docstring)."""
+                progress=None, reuse=None) -> ShadowFreeResult:
+    """Shadow-free texture T_final and per-lamp display maps M_k (see the module docstring).
+
+    ``reuse``: the first solution of an earlier run on the same geometry, lamps and preset
+    (``result.solution`` of a "texel" or "none" run): its mesh, links and form factors are kept
+    and only the reflectances, exitances and maps are estimated again (photos edited)."""
     opt = options or ShadowFreeOptions()
     cache = {}              # direct light per texel, cast once (see _texel_direct)
     if opt.mode not in ("element", "texel", "none"):
@@ -278,9 +283,16 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
             return None
         return lambda f, msg: progress(lo + (hi - lo) * f, msg)
 
-    stage(0.05, "First radiosity solution")
-    sol = solve_radiosity(scene1, opt.preset, occluder=occluder, seed=opt.seed,
-                          progress=sub_progress(0.05, 0.4))
+    if reuse is not None and opt.mode != "element":
+        stage(0.05, "Reusing the radiosity mesh and links")
+        sol = copy.copy(reuse)                 # the caller's solution stays as it was
+        sol.system = copy.copy(reuse.system)
+        sol.scene = scene1
+        solve_basis(sol, scene1.rho[sol.system.patch])    # scene exitances, eq 4.1 reflectances
+    else:
+        stage(0.05, "First radiosity solution")
+        sol = solve_radiosity(scene1, opt.preset, occluder=occluder, seed=opt.seed,
+                              progress=sub_progress(0.05, 0.4))
     stage(0.4, "Lamp exitances and reflectances")
     fit = _fit_lamps(sol, tm, photo, textured, lamp_patch, est, opt, occluder, cache)
     scale_k, eq_k, nnls_k = fit
