@@ -187,7 +187,7 @@ def test_unwrap_non_planar_quads_stay_whole(scene):
 
 
 def test_memory_estimate_counts_texels():
-    """The texel term follows the measured shadow-free peak (office, 2 lamps: 860 MB at
+    """The texel term follows the measured shadow-free peak (office, 2 lamps: 997 MB at
     1.17 M texels) from above, and grows with the texture size."""
     from relight_addon.demo_scenes.office import office_geometry, office_scene_data
     data = office_geometry(0, 2, 48)
@@ -197,4 +197,4 @@ def test_memory_estimate_counts_texels():
     e_small = estimate_precompute_memory(small, "draft") / 2**20
     e_big = estimate_precompute_memory(big, "draft") / 2**20
     assert e_small < e_big
-    assert 860 <= e_big < 2 * 860, e_big
+    assert 997 <= e_big < 2 * 997, e_big

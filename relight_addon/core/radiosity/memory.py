@@ -22,8 +22,10 @@ clear message instead of swapping or being killed.  The model is fitted on
   case.  ``LEAF_BYTES`` covers the per-element arrays of the subdivided leaves.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
   every used image ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of
-  ``RAY_CHUNK_BYTES``: measured on the office (2 lamps, texel mode, draft), peak RSS 457 MB at
-  18k texels and 860 MB at 1.17 M texels, i.e. 350 bytes per texel with 2 lamps.
+  ``RAY_CHUNK_BYTES``: measured on the office (2 lamps, texel mode, draft, two ray-casting
+  threads), peak RSS 267 MB at 18k texels and 997 MB at 1.17 M texels, i.e. about 400 bytes
+  per texel with 2 lamps over a constant of two ray chunks in flight (590 MB at 73k texels;
+  benchmarks/results/texel_scaling.md).
 """
 from __future__ import annotations
 
@@ -38,9 +40,9 @@ LINK_BYTES = 2 * 1024
 PATCH_BYTES = 144 * 1024
 LEAF_BYTES = 8 * 1024
 LINKS_PER_LEAF_LOG = 6.0
-TEXEL_BYTES = 120
+TEXEL_BYTES = 160
 TEXEL_LAMP_BYTES = 140
-RAY_CHUNK_BYTES = 400 * 2**20
+RAY_CHUNK_BYTES = 550 * 2**20    # two ray-casting threads, ~250 MB of rays each
 
 
 def estimate_leaves(areas, min_area_fraction) -> float:

@@ -20,7 +20,7 @@ from ..geometry.sampling import area_uniform_uv
 from ..radiosity.links import _R2, _kernel
 from ..scene import SceneData, bilinear_point, quad_area_normal
 
-_CHUNK_RAYS = 1 << 20
+_CHUNK_RAYS = 1 << 19     # rays in flight per call (two calls may run at once)
 FIRST_RAYS = 16
 TABLE = 256            # area-uniform sample points kept per lamp patch
 

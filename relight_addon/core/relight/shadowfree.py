@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import copy
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -767,13 +768,23 @@ def _texel_direct(scene, tm, occluder, opt, cache):
     centre = np.concatenate([im.uv for im in parts]) if parts else np.zeros((0, 2))
     size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
                            for im in parts]) if parts else np.zeros((0, 2))
-    for c0 in range(0, T, TEXEL_CHUNK):
+    def chunk(c0):
         sl = slice(c0, c0 + TEXEL_CHUNK)
         pts, nrm, n_sub = _texel_points(scene, patch[sl], u[sl], v[sl], centre[sl], size[sl],
                                         opt.texel_samples)
         # the mean over each texel's footprint (a photo texel integrates it too)
         U[sl], O[sl] = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub], occluder,
                                        opt.texel_rays, opt.seed + 11 + c0)
+
+    # Chunks on two threads (numpy and Embree release the GIL); each has its own seed, so the
+    # result does not depend on scheduling.
+    starts = range(0, T, TEXEL_CHUNK)
+    if len(starts) > 1:
+        with ThreadPoolExecutor(2) as pool:
+            list(pool.map(chunk, starts))
+    else:
+        for c0 in starts:
+            chunk(c0)
     cache["direct"] = (U, O)
     return U, O
 
