@@ -154,7 +154,10 @@ def test_unoccluded_parallel_squares_direct_irradiance():
 
 # -- degenerate input --------------------------------------------------------------------------
 def test_scene_without_lamp_is_a_clear_error():
-    scene = closed_cube(rho=0.5, emission=0.0)
+    scene = closed_cube(rho=0.5, emission=0.0)          # a lamp face, at zero power
+    with pytest.raises(SceneError, match="zero power"):
+        solve_radiosity(scene, "draft")
+    scene.lamp[:] = -1                                  # no lamp at all
     with pytest.raises(SceneError, match="no lamps"):
         solve_radiosity(scene, "draft")
 

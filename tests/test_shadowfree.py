@@ -273,3 +273,12 @@ def test_overlay_values(office, results):
     corners, codes = element_values(results["element+references"], "FRONTIER")
     assert {0.0, 1.0} <= set(np.unique(codes))
     assert len(element_values(res, "FRONTIER")[1]) == 0       # texel mode has none
+
+
+def test_lamps_all_at_zero_power_is_a_clear_error():
+    from relight_addon.core.scene import SceneError
+    from relight_addon.demo_scenes.office import office_geometry
+    sc = office_scene_data(office_geometry(0, 2, 24))
+    sc.emission[:] = 0.0
+    with pytest.raises(SceneError, match="zero power"):
+        shadow_free(sc, ShadowFreeOptions(mode="texel", preset="draft"))

@@ -189,6 +189,9 @@ class SceneData:
         if self.n_patches == 0:
             raise SceneError("The scene has no usable faces")
         if not np.any(self.emission > 0):
+            if np.any(self.lamp >= 0):
+                raise SceneError("Every lamp has zero power: set the real lamps to their power "
+                                 "in the photo before Precompute (then animate them)")
             raise SceneError("The scene has no lamps: add an area light or an emissive face")
 
 
