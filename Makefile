@@ -27,8 +27,8 @@ test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) tests
 
 demo: $(STAMP)
-	$(VENV)/bin/python -m relight_addon.demo
-	$(VENV)/bin/python -m relight_addon.demo_office
+	$(VENV)/bin/python -m demo.cornell
+	$(VENV)/bin/python -m demo.office
 
 venv: $(STAMP)
 venv-lts: $(STAMP_LTS)

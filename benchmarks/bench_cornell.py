@@ -42,7 +42,7 @@ def child(preset: str) -> None:
     completed before a timeout is still reported)."""
     _setup_path()
     from relight_addon.core.radiosity.precompute import solve_radiosity
-    from relight_addon.core.testscenes import cornell_box
+    from scenes.testscenes import cornell_box
     scene = cornell_box()
     for _ in range(REPEATS):
         t0 = time.perf_counter()
@@ -98,7 +98,7 @@ def errors(B, ref, lamp):
 def main():
     _setup_path()
     from reference.mitsuba_ref import patch_radiosity, relative_stderr
-    from relight_addon.core.testscenes import cornell_box
+    from scenes.testscenes import cornell_box
     scene = cornell_box()
     lamp = np.flatnonzero(scene.emission.sum(axis=1) > 0)
     assert list(lamp) == [16], lamp

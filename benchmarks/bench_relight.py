@@ -97,7 +97,7 @@ def measure(args):
                 print(f"[blas {args.blas_threads}] L={L:7d} {np.dtype(dtype).name:8s} {name:36s} "
                       f"{ms:8.4f} ms", file=sys.stderr, flush=True)
     from relight_addon.core.radiosity.precompute import solve_radiosity
-    from relight_addon.core.testscenes import cornell_box
+    from scenes.testscenes import cornell_box
     sol = solve_radiosity(cornell_box(subdivide=1), args.real_preset)
     real = {"k": len(sol.basis), "L": len(sol.leaves),
             "radiosity([1.0])": median_ms(lambda: sol.radiosity([1.0]), args.repeat),

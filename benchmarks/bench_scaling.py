@@ -34,7 +34,7 @@ def child(n: int, preset: str, mem_gb: float) -> None:
         resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
     sys.path.insert(0, str(ROOT))
     from relight_addon.core.radiosity.precompute import solve_radiosity
-    from relight_addon.core.testscenes import cornell_box
+    from scenes.testscenes import cornell_box
     scene = cornell_box(subdivide=n)
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.perf_counter()

@@ -1,7 +1,7 @@
 """Shadow-free textures against Cycles ground truth (issue 3): writes results/shadowfree.md and
 results/shadowfree_<lighting>.png.
 
-Scene: the office of demo_scenes.office (seed 0, 2 lamps of 40 W, 48^2 texels per surface).
+Scene: the office of scenes.office (seed 0, 2 lamps of 40 W, 48^2 texels per surface).
 Input photo and truth are Cycles DIFFUSE bakes (adaptive sampling off) from independent seeds:
 per lamp alone, seed 0 for the photo, seed 1 for the truth, combined linearly for every target
 lighting (shadowfree_data.py).  The noise floor is the difference of the two at the original
@@ -76,7 +76,7 @@ def main(argv=None):
     from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
     from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
     from relight_addon.core.texture.mapping import rasterize_patches
-    from relight_addon.demo_scenes.office import office_scene_data
+    from scenes.office import office_scene_data
 
     t0 = time.perf_counter()
     info = sd.build_scene()

@@ -23,7 +23,7 @@ CHILD = r"""
 import json, resource, sys, time
 import numpy as np
 sys.path.insert(0, ROOT)
-from relight_addon.demo_scenes.office import office_geometry, office_scene_data
+from scenes.office import office_geometry, office_scene_data
 from relight_addon.core.relight.shadowfree import shadow_free, ShadowFreeOptions
 from relight_addon.core.radiosity.memory import estimate_precompute_memory
 up, mode = int(sys.argv[1]), sys.argv[2]

@@ -4,7 +4,7 @@ Light transport is linear in the lamp powers (Cycles without clamping), so one b
 alone gives every target lighting: bake(I) = sum_k I_k bake_k.  Independent seeds are averaged
 into two disjoint halves: the "photo" (input texture) and the "truth" (reference), so that the
 input's noise and the reference's noise are independent, and their difference at the original
-lighting is the noise floor.  Bakes are cached on disk (demo_scenes.bake).
+lighting is the noise floor.  Bakes are cached on disk (scenes.bake).
 """
 from __future__ import annotations
 
@@ -18,14 +18,14 @@ SCENE = dict(seed=0, n_lamps=2, texture_size=48, variant="small")
 def build_scene():
     import bpy  # noqa: PLC0415
 
-    from relight_addon.demo_scenes.office import build_office  # noqa: PLC0415
+    from scenes.office import build_office  # noqa: PLC0415
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return build_office(**SCENE)
 
 
 def lamp_bakes(info, samples=2048, seeds=range(2)):
     """{lamp name: [bake dict per seed]} with only that lamp on at its original power."""
-    from relight_addon.demo_scenes.bake import bake_lighting  # noqa: PLC0415
+    from scenes.bake import bake_lighting  # noqa: PLC0415
     powers = dict(info.lamp_powers)
     out = {}
     for lamp in powers:

@@ -6,7 +6,7 @@ pytest.importorskip("mitsuba")
 
 from reference.mitsuba_ref import patch_radiosity, relative_stderr  # noqa: E402
 from relight_addon.core.radiosity.precompute import solve_radiosity  # noqa: E402
-from relight_addon.core.testscenes import cornell_box, parallel_squares  # noqa: E402
+from scenes.testscenes import cornell_box, parallel_squares  # noqa: E402
 
 
 def test_form_factor_with_blocker_matches_mitsuba_irradiance_meter():

@@ -8,7 +8,7 @@ from relight_addon.core.radiosity.hierarchy import Hierarchy
 from relight_addon.core.radiosity.precompute import solve_radiosity
 from relight_addon.core.radiosity.presets import PRESETS
 from relight_addon.core.scene import SceneData, quads_from_boxes
-from relight_addon.core.testscenes import cornell_box
+from scenes.testscenes import cornell_box
 
 
 def _random_quads(n, rng):

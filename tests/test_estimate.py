@@ -6,7 +6,7 @@ from relight_addon.core.radiosity.precompute import solve_radiosity
 from relight_addon.core.relight.estimate import (LUMINANCE, equal_lamp_exitance,
                                                  estimate_reflectance, fit_lamp_exitance)
 from relight_addon.core.scene import SceneData
-from relight_addon.core.testscenes import cornell_box, flip
+from scenes.testscenes import cornell_box, flip
 
 
 def test_uniform_lighting_recovers_reflectances_up_to_the_mean():

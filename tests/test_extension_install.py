@@ -108,8 +108,8 @@ def test_zip_contents(extension_zip):
     for required in ("blender_manifest.toml", "__init__.py", "operators/__init__.py",
                      "panels/__init__.py", "relight_addon/__init__.py"):
         assert required in names
-    excluded = ("tests/", "tools/", "benchmarks/", "requirements/", ".ci/", ".git", ".venv",
-                "dist/", "out/", "Makefile", "README.md")
+    excluded = ("tests/", "tools/", "benchmarks/", "requirements/", "scenes/", "demo/", ".ci/",
+                ".git", ".venv", "dist/", "out/", "Makefile", "README.md")
     leaked = [n for n in names if n.startswith(excluded) or "__pycache__" in n or n.endswith(".pyc")]
     assert not leaked, leaked
     wheels = [n for n in names if n.startswith("wheels/")]

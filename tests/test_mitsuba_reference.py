@@ -15,7 +15,7 @@ for p in (ROOT, ROOT / "tests"):
 
 pytest.importorskip("mitsuba")
 
-from relight_addon.core import testscenes as T  # noqa: E402
+from scenes import testscenes as T  # noqa: E402
 from relight_addon.core.scene import SceneData  # noqa: E402
 from reference import mitsuba_ref as M  # noqa: E402
 

@@ -14,8 +14,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from relight_addon.core.geometry.formfactor import point_to_polygon  # noqa: E402
-from relight_addon.demo_scenes import bake  # noqa: E402
-from relight_addon.demo_scenes.office import (ROOM, TABLE_CENTRE_XY, _diffuse_material,  # noqa: E402
+from scenes import bake  # noqa: E402
+from scenes.office import (ROOM, TABLE_CENTRE_XY, _diffuse_material,  # noqa: E402
                                               _new_image, build_office, office_geometry)
 
 SIZE = 48

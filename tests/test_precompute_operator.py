@@ -23,7 +23,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from relight_addon.dev import PACKAGE as PKG, register_repo_addon  # noqa: E402
+from scenes.addon import PACKAGE as PKG, register_repo_addon  # noqa: E402
 from relight_addon.core.texture.colour import srgb_to_linear  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

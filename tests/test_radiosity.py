@@ -7,7 +7,7 @@ from relight_addon.core.radiosity.links import final_form_factors
 from relight_addon.core.radiosity.precompute import Cancelled, solve_radiosity
 from relight_addon.core.radiosity.presets import PRESETS
 from relight_addon.core.scene import SceneData, SceneError, quads_from_boxes
-from relight_addon.core.testscenes import (closed_cube, cornell_box, flip, parallel_squares,
+from scenes.testscenes import (closed_cube, cornell_box, flip, parallel_squares,
                                            subdivide_quads)
 
 

@@ -1,6 +1,6 @@
 """Shadow-free textures (issue 3) against Cycles truth, on a small fast office.
 
-The office of demo_scenes.office (2 lamps of 40 W, 24^2 texels per surface).  Photo and truth
+The office of scenes.office (2 lamps of 40 W, 24^2 texels per surface).  Photo and truth
 are Cycles DIFFUSE bakes of each lamp alone (adaptive sampling off, cached in .cache/bakes)
 from independent seeds, combined linearly for every lighting.  Thresholds are looser than the
 benchmark's (benchmarks/results/shadowfree.md), so that CI catches regressions; every figure is
@@ -15,8 +15,8 @@ from relight_addon.core.relight.shadowfree import (FACTOR_MAX, ShadowFreeOptions
                                                    shadow_free)
 from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402
 from relight_addon.core.texture.mapping import rasterize_patches  # noqa: E402
-from relight_addon.demo_scenes.bake import bake_lighting  # noqa: E402
-from relight_addon.demo_scenes.office import build_office, office_scene_data  # noqa: E402
+from scenes.bake import bake_lighting  # noqa: E402
+from scenes.office import build_office, office_scene_data  # noqa: E402
 
 SIZE = 24
 SAMPLES = 512
@@ -243,7 +243,7 @@ def test_overlay_values(office, results):
     slab is in shadow (B/D low, a lamp hidden), the open floor by the east wall is lit, the
     ceiling sees no lamp; the strongest link comes from a lamp."""
     from relight_addon.core.display.elements import element_values, strongest_links
-    from relight_addon.demo_scenes.office import LAMP_GAP, ROOM, TABLE
+    from scenes.office import LAMP_GAP, ROOM, TABLE
     res = results["texel"]
 
     def centroids(corners):
@@ -277,7 +277,7 @@ def test_overlay_values(office, results):
 
 def test_lamps_all_at_zero_power_is_a_clear_error():
     from relight_addon.core.scene import SceneError
-    from relight_addon.demo_scenes.office import office_geometry
+    from scenes.office import office_geometry
     sc = office_scene_data(office_geometry(0, 2, 24))
     sc.emission[:] = 0.0
     with pytest.raises(SceneError, match="zero power"):

@@ -17,7 +17,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_precompute_operator as tpo  # noqa: E402
 
 from relight_addon.core.radiosity.memory import estimate_precompute_memory  # noqa: E402
-from relight_addon.core.testscenes import cornell_box  # noqa: E402
+from scenes.testscenes import cornell_box  # noqa: E402
 
 CUBE_V = [(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]
 CUBE_F = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
@@ -189,7 +189,7 @@ def test_unwrap_non_planar_quads_stay_whole(scene):
 def test_memory_estimate_counts_texels():
     """The texel term follows the measured shadow-free peak (office, 2 lamps: 997 MB at
     1.17 M texels) from above, and grows with the texture size."""
-    from relight_addon.demo_scenes.office import office_geometry, office_scene_data
+    from scenes.office import office_geometry, office_scene_data
     data = office_geometry(0, 2, 48)
     small = office_scene_data(data)
     big = office_scene_data(data, {s.name: np.kron(s.albedo, np.ones((8, 8, 1), np.float32))

@@ -49,7 +49,7 @@ import time
 
 import numpy as np
 
-from .dev import register_repo_addon
+from scenes.addon import register_repo_addon
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAMES = (1, 2, 3)
@@ -108,7 +108,7 @@ def _setup_render(scene, res, eevee_samples, cycles_samples, denoise):
 
 def make_photographed(bpy, info, bakes):
     """Photo images replace the albedo in each object's material; returns {obj: truth material}."""
-    from .demo_scenes.office import _new_image
+    from scenes.office import _new_image
     truth = {}
     for obj_name in info.objects:
         mat = bpy.data.materials[info.materials[obj_name]]
@@ -184,8 +184,8 @@ def main(argv=None):
 
     import bpy
 
-    from .demo_scenes.bake import bake_lighting
-    from .demo_scenes.office import build_office
+    from scenes.bake import bake_lighting
+    from scenes.office import build_office
 
     times = {}
     out = os.path.abspath(args.out)

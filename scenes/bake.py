@@ -43,7 +43,7 @@ import numpy as np
 
 BAKE_TO_RADIOSITY = np.pi  # bake value x this = radiosity (exitance, W/m^2), measured
 CACHE_STATS = {"hits": 0, "misses": 0, "bake_seconds": []}
-_REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def default_cache_dir() -> str:
@@ -296,7 +296,7 @@ def stack(bakes: dict, names=None) -> np.ndarray:
 
 def delta_e_2000_texels(a: dict, b: dict, masks: dict | None = None) -> np.ndarray:
     """Per-texel CIEDE2000 between two bake dicts (linear RGB -> LAB), optionally masked."""
-    from ..core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: PLC0415
+    from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: PLC0415
     names = sorted(a)
     x, y = stack(a, names), stack(b, names)
     if masks is not None:

@@ -243,7 +243,7 @@ def office_scene_data(data: OfficeData, textures: dict | None = None):
     surface index; the viewpoint is the camera.  Image i belongs to surface i."""
     from types import SimpleNamespace  # noqa: PLC0415
 
-    from ..core.scene import SceneData  # noqa: PLC0415
+    from relight_addon.core.scene import SceneData  # noqa: PLC0415
     corners, uvs, image, group = [], [], [], []
     images = []
     for i, s in enumerate(data.surfaces):

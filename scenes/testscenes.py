@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import SceneData, quads_from_boxes
+from relight_addon.core.scene import SceneData, quads_from_boxes
 
 # Area-averaged form factor between parallel, directly opposed unit squares at distance 1.
 PARALLEL_UNIT_SQUARES_F1 = 0.199825

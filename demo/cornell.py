@@ -52,8 +52,8 @@ def to_srgb(linear):
 
 
 def main(argv=None):
-    from .core.radiosity.precompute import solve_radiosity
-    from .core.testscenes import cornell_box
+    from relight_addon.core.radiosity.precompute import solve_radiosity
+    from scenes.testscenes import cornell_box
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--preset", default="high")

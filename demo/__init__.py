@@ -1,0 +1,1 @@
+"""`make demo`: the Cornell box solve (demo.cornell) and the relit office (demo.office)."""
