@@ -39,6 +39,7 @@ def ray_backend(found):
     Falls back to a guess from the probed imports if the core module cannot be imported.
     """
     try:
+        from ..relight_addon import blender  # noqa: F401  (registers the mathutils fallback)
         from ..relight_addon.core.geometry import raycast
 
         name = raycast.active_backend_name()

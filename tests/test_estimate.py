@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 
 from relight_addon.core.radiosity.precompute import solve_radiosity
-from relight_addon.core.relight.estimate import (LUMINANCE, equal_lamp_exitance,
-                                                 estimate_reflectance, fit_lamp_exitance)
+from relight_addon.core.relight.albedo import estimate_reflectance
+from relight_addon.core.relight.exitance import equal_lamp_exitance, fit_lamp_exitance
+from relight_addon.core.texture.colour import LUMINANCE
 from relight_addon.core.scene import SceneData
 from scenes.testscenes import cornell_box, flip
 

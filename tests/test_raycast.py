@@ -26,6 +26,9 @@ def _have_bvhtree():
         return False
 
 
+if _have_bvhtree():
+    from relight_addon.blender.bvhtree import BVHTreeOccluder  # registers the fallback
+
 BACKENDS = [
     pytest.param("embree", marks=pytest.mark.skipif(not _have_embree(), reason="no embreex")),
     pytest.param("bvhtree", marks=pytest.mark.skipif(not _have_bvhtree(), reason="no bpy")),
@@ -263,7 +266,7 @@ def test_auto_falls_back_to_bvhtree(monkeypatch, random_scene, random_results):
     assert rc.active_backend_name() == "bvhtree"
     assert rc.available_backends() == ["bvhtree", "numpy"]
     occ = rc.make_occluder(tris)
-    assert isinstance(occ, rc.BVHTreeOccluder) and occ.name == "bvhtree"
+    assert isinstance(occ, BVHTreeOccluder) and occ.name == "bvhtree"
     got = occ.segments_occluded(o[:20000], e[:20000])
     ref = random_results.get("embree", random_results["bvhtree"])[:20000]
     assert (got == ref).mean() >= 0.999
@@ -290,3 +293,28 @@ def test_auto_without_any_backend_raises(monkeypatch):
         rc.make_occluder(SQUARE, "optix")
     # numpy stays usable on demand
     assert rc.make_occluder(SQUARE, "numpy").segments_occluded([[0.5, 0.5, 1]], [[0.5, 0.5, -1]])[0]
+
+
+def test_core_never_imports_bpy_or_mathutils():
+    """The fallback lives in the bridge: core modules import neither bpy nor mathutils, and a
+    whole precompute in a fresh interpreter leaves both unimported."""
+    import ast
+    import glob
+    import os
+    import subprocess
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    bad = []
+    for path in glob.glob(os.path.join(root, "relight_addon", "core", "**", "*.py"), recursive=True):
+        for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            bad += [f"{path}: {n}" for n in names if n.split(".")[0] in ("bpy", "mathutils")]
+    assert not bad, bad
+    code = ("import sys; from scenes.testscenes import cornell_box; "
+            "from relight_addon.core.radiosity.precompute import solve_radiosity; "
+            "solve_radiosity(cornell_box(), 'draft'); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('bpy', 'mathutils')))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]", out.stdout

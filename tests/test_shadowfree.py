@@ -11,8 +11,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from relight_addon.core.relight.shadowfree import (FACTOR_MAX, ShadowFreeOptions,  # noqa: E402
-                                                   shadow_free)
+from relight_addon.core.relight.maps import FACTOR_MAX  # noqa: E402
+from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free  # noqa: E402
 from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402
 from relight_addon.core.texture.mapping import rasterize_patches  # noqa: E402
 from scenes.bake import bake_lighting  # noqa: E402

@@ -50,7 +50,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from ..core.scene import SceneData
+from ..core.scene import RHO_MAX, ImageTexels, SceneData
+from ..core.texture.colour import srgb_to_linear
 
 # Material.use_nodes is deprecated (always on) from Blender 5.0.
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
@@ -62,22 +63,11 @@ AREA_SHAPES = {"SQUARE", "RECTANGLE", "DISK", "ELLIPSE"}
 # A disk/ellipse lamp is a fan of this many planar quads around its centre (2 * DISK_QUADS
 # polygon vertices), scaled so that its area equals the ellipse's.
 DISK_QUADS = 8
-RHO_MAX = 0.99
 DEFAULT_RHO = 0.8  # Blender's default base colour
 # Colour spaces whose byte values are already linear (everything else is decoded as sRGB).
 _LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear Rec.2020", "Linear CIE-XYZ D65",
                   "Linear CIE-XYZ E", "Linear DCI-P3 D65", "Linear FilmLight E-Gamut", "ACEScg",
                   "ACES2065-1", "Working Space", "Raw", "Linear", "XYZ"}
-
-
-@dataclass
-class ImageTexels:
-    """One material image: linear RGB texels (h, w, 3) float32, row 0 at the bottom (Blender)."""
-    name: str
-    texels: np.ndarray
-    mean: np.ndarray
-    filepath: str = ""
-    colorspace: str = ""
 
 
 @dataclass
@@ -110,11 +100,6 @@ class ReadReport:
 
 
 # -- colour ------------------------------------------------------------------------------------
-
-def srgb_to_linear(x):
-    x = np.asarray(x, dtype=np.float32)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
-
 
 def image_texels(image):
     """Linear RGB texels (h, w, 3) float32 of a bpy image, or None when it has no pixels."""

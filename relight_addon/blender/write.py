@@ -42,7 +42,7 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
-from ..core.relight.shadowfree import DISPLAY_EPS, SEAM_PIXELS, map_images, ratio_maps
+from ..core.relight.maps import DISPLAY_EPS, SEAM_PIXELS, map_images, ratio_maps
 from ..core.texture.mapping import rasterize_patches
 
 GENERATED = "relight_generated"
@@ -59,7 +59,7 @@ _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 def display_maps(scene_data, solution, seam_pixels=SEAM_PIXELS, eps=DISPLAY_EPS, warnings=None):
     """Texture correction off (DRB97): per image used by some patch ``(coverage (H, W) bool,
     maps (k, H, W, 3) float32)`` with ``maps[k] = B_k / D`` (0 where D < floor), dilated across
-    seams (core/relight/shadowfree.py ratio_maps and map_images).  Overlapping UVs (a texel
+    seams (core/relight/maps.py ratio_maps and map_images).  Overlapping UVs (a texel
     claimed by several faces: it can show one face's light only) are appended to ``warnings``
     when a list is given."""
     shapes = [im.texels.shape[:2] for im in scene_data.images]

@@ -18,10 +18,24 @@ import numpy as np
 PLANARITY_TOLERANCE = 1e-4
 # Faces with an area below this fraction of the mean face area are dropped as degenerate.
 DEGENERATE_AREA_FRACTION = 1e-10
+# Reflectances are kept below this (user materials and estimates alike): the radiosity system
+# must stay solvable, and no real diffuse surface reflects more.
+RHO_MAX = 0.99
 
 
 class SceneError(ValueError):
     """Input the solver cannot work with; the message is meant for the user."""
+
+
+@dataclass
+class ImageTexels:
+    """One photograph used by the scene's materials: linear RGB texels (h, w, 3) float32, row 0
+    at the bottom (Blender's order), and their mean."""
+    name: str
+    texels: np.ndarray
+    mean: np.ndarray
+    filepath: str = ""
+    colorspace: str = ""
 
 
 def bilinear_point(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -164,6 +178,14 @@ class SceneData:
         if len(first) < self.n_patches:
             self.dropped_duplicate += self.n_patches - len(first)
             self._take(np.sort(first))
+
+    def with_rho(self, rho) -> "SceneData":
+        """A shallow copy with other patch reflectances (clipped to [0, RHO_MAX]; the patches
+        are already cleaned, so nothing is split or dropped again)."""
+        new = object.__new__(SceneData)
+        new.__dict__.update(self.__dict__)
+        new.rho = np.clip(np.asarray(rho, float), 0.0, RHO_MAX)
+        return new
 
     # -- derived quantities ---------------------------------------------------------------
     @property

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..radiosity.links import PARTIAL, VISIBLE
-from ..relight.shadowfree import SIGNIFICANT_SHARE, VIS_TOL, _lum, _Transport
+from ..radiosity.links import VISIBLE
+from ..relight.refine import SIGNIFICANT_SHARE, visibility_class
+from ..relight.transport import Transport
+from ..texture.colour import luminance
 
 MODES = ("RATIO", "VISIBILITY", "FRONTIER")
 
@@ -31,19 +33,19 @@ def element_values(result, mode: str):
         return h.corners[leaves[draw]], codes[draw].astype(float)
     sol = result.solution
     h, leaves = sol.hierarchy, sol.leaves
-    Hocc_k, HU_k, Docc_k, DU_k = _Transport(sol).irradiance(sol.basis)
+    Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
     lamp_leaf = sol.scene.lamp[h.patch[leaves]] >= 0
     if mode == "RATIO":
-        hu, ho = _lum(HU_k.sum(0)), _lum(Hocc_k.sum(0))
+        hu, ho = luminance(HU_k.sum(0)), luminance(Hocc_k.sum(0))
         ratio = np.where(hu > 0, ho / np.where(hu > 0, hu, 1.0), 1.0)
         keep = ~lamp_leaf
         return h.corners[leaves[keep]], np.clip(ratio[keep], 0.0, 1.0)
     if mode == "VISIBILITY":
-        du, do = _lum(DU_k), _lum(Docc_k)                        # (k, L)
+        du, do = luminance(DU_k), luminance(Docc_k)                        # (k, L)
         att = np.where(du > 0, do / np.where(du > 0, du, 1.0), 1.0)
-        share = du / np.maximum(_lum(HU_k.sum(0))[None], 1e-300)
+        share = du / np.maximum(luminance(HU_k.sum(0))[None], 1e-300)
         sig = share >= SIGNIFICANT_SHARE
-        code = np.where(att >= 1 - VIS_TOL, VISIBLE, np.where(att <= VIS_TOL, 2, PARTIAL))
+        code = visibility_class(att)
         worst = np.where(sig, code, VISIBLE).max(axis=0, initial=VISIBLE)
         keep = ~lamp_leaf
         return h.corners[leaves[keep]], worst[keep].astype(float)

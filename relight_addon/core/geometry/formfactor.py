@@ -192,3 +192,11 @@ def patch_to_patch(recv_corners, src_corners, m: int = 8):
                           np.repeat(src_corners, k, axis=0), np.repeat(sn, k, axis=0))
     ff = ff.reshape(n, k)
     return (ff * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
+
+
+def point_kernel(n_r, n_s, d):
+    """cos cos' / r^2 between points (without 1/pi), zero unless both face each other."""
+    dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    cr = d[:, 0] * n_r[:, 0] + d[:, 1] * n_r[:, 1] + d[:, 2] * n_r[:, 2]
+    cs = -(d[:, 0] * n_s[:, 0] + d[:, 1] * n_s[:, 1] + d[:, 2] * n_s[:, 2])
+    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)

@@ -5,11 +5,10 @@ Backends (all built from world-space triangles ``(t, 3, 3)``):
 ``EmbreeOccluder``   embreex (Embree 4), batched float32 queries, chunked, run on a thread pool
                      (embreex releases the GIL inside ``run``: 1.7-1.9x with 2 threads on an
                      idle 2-core machine).
-``BVHTreeOccluder``  ``mathutils.bvhtree.BVHTree`` fallback where no embreex wheel exists; one
-                     Python call per ray (0.1-1 M rays/s: BVHTree finds the closest hit, no
-                     any-hit early exit, so cluttered scenes and long segments cost most).  The only place in ``core`` allowed to
-                     import mathutils, lazily.  Outside Blender mathutils only exists once ``bpy``
-                     has been imported (by the caller, never by this module).
+``BVHTreeOccluder``  the fallback where no embreex wheel exists (Linux aarch64, Windows arm64):
+                     ``mathutils.bvhtree`` lives in the bridge (``blender/bvhtree.py``), which
+                     registers it here with :func:`register_backend`; core never imports
+                     mathutils.
 ``NumpyOccluder``    brute-force Moller-Trumbore over rays x triangles, vectorised in chunks: for
                      tiny scenes and as an independent check in tests.  Never picked by "auto".
 
@@ -42,9 +41,19 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 __all__ = [
-    "Occluder", "EmbreeOccluder", "BVHTreeOccluder", "NumpyOccluder",
-    "make_occluder", "available_backends", "active_backend_name",
+    "Occluder", "EmbreeOccluder", "NumpyOccluder", "RAY_OFFSET", "ray_offset",
+    "make_occluder", "available_backends", "active_backend_name", "register_backend",
 ]
+
+# Ray end points on a surface are lifted along its normal by this fraction of the scene's
+# bounding-box diagonal, so that a ray does not hit the element it starts or ends on (float32
+# backends resolve about 1e-7 of the scene size).
+RAY_OFFSET = 1e-6
+
+
+def ray_offset(scene_size: float) -> float:
+    """The lift (world units) of ray end points off their surfaces in a scene of this size."""
+    return RAY_OFFSET * (float(scene_size) or 1.0)
 
 # Rays per embreex call: bounds temporary memory (~100 bytes per ray) and is the unit of work
 # handed to the thread pool.
@@ -242,65 +251,6 @@ class EmbreeOccluder(Occluder):
 
 
 # ------------------------------------------------------------------------------------------
-# mathutils BVHTree (fallback)
-# ------------------------------------------------------------------------------------------
-
-def _import_bvhtree():
-    from mathutils.bvhtree import BVHTree  # only import of mathutils in core (documented)
-    return BVHTree
-
-
-class BVHTreeOccluder(Occluder):
-    """mathutils BVHTree fallback: one ``ray_cast`` call per ray (Blender normalises direction
-    and measures ``distance`` in world units; no tnear, so origins are moved instead)."""
-
-    name = "bvhtree"
-
-    def __init__(self, triangles, epsilon: float = 0.0):
-        super().__init__(triangles)
-        BVHTree = _import_bvhtree()
-        self._tree = None
-        self._centre = np.zeros(3)
-        if self.n_triangles:
-            # BVHTree stores float32: centre the scene first, as for Embree.
-            self._centre = 0.5 * (self.triangles.min(axis=(0, 1)) + self.triangles.max(axis=(0, 1)))
-            verts = (self.triangles - self._centre).reshape(-1, 3).tolist()
-            polys = np.arange(3 * self.n_triangles).reshape(-1, 3).tolist()
-            self._tree = BVHTree.FromPolygons(verts, polys, all_triangles=True, epsilon=epsilon)
-
-    # Rays per Python batch.  Converting all rays with .tolist() at once creates millions of
-    # GC-tracked lists and triggers full collections (2-4x slower inside bpy); small batches
-    # die young.
-    _BATCH = 512
-
-    def _occluded(self, o, d, eps):
-        length = np.sqrt(np.einsum("ij,ij->i", d, d))
-        start = (o - self._centre) + eps * d
-        dist = length * (1.0 - 2.0 * eps)
-        rc = self._tree.ray_cast
-        out = np.empty(len(o), bool)
-        k = self._BATCH
-        for a in range(0, len(o), k):
-            # index (item 2) is None for a miss
-            out[a:a + k] = [rc(p, q, s)[2] is not None for p, q, s in
-                            zip(start[a:a + k].tolist(), d[a:a + k].tolist(), dist[a:a + k].tolist())]
-        return out
-
-    def _first_hit(self, o, u, tmax):
-        # BVHTree stores floats: a distance beyond float32 range comes back as a bogus hit.
-        tmax = np.minimum(tmax, 1e30)
-        start = o - self._centre
-        rc = self._tree.ray_cast
-        out = np.empty(len(o))
-        k = self._BATCH
-        for a in range(0, len(o), k):
-            t = [rc(p, q, s)[3] for p, q, s in
-                 zip(start[a:a + k].tolist(), u[a:a + k].tolist(), tmax[a:a + k].tolist())]
-            out[a:a + k] = [np.inf if x is None else x for x in t]
-        return out
-
-
-# ------------------------------------------------------------------------------------------
 # numpy brute force
 # ------------------------------------------------------------------------------------------
 
@@ -355,16 +305,24 @@ class NumpyOccluder(Occluder):
 # selection
 # ------------------------------------------------------------------------------------------
 
-_BACKENDS = {"embree": EmbreeOccluder, "bvhtree": BVHTreeOccluder, "numpy": NumpyOccluder}
-_AUTO_ORDER = ("embree", "bvhtree")
+_BACKENDS = {"embree": EmbreeOccluder, "numpy": NumpyOccluder}
+_IMPORT_CHECKS = {"embree": _import_embree, "numpy": lambda: None}
+_AUTO_ORDER = ["embree"]
+
+
+def register_backend(name: str, factory, import_check, auto: bool = True):
+    """Add a backend (e.g. the bridge's mathutils BVHTree): ``factory(triangles, **kwargs)``
+    builds an Occluder, ``import_check()`` raises when it cannot work here; with ``auto`` it
+    is tried after the ones registered before it."""
+    _BACKENDS[name] = factory
+    _IMPORT_CHECKS[name] = import_check
+    if auto and name not in _AUTO_ORDER:
+        _AUTO_ORDER.append(name)
 
 
 def _importable(name: str) -> bool:
     try:
-        if name == "embree":
-            _import_embree()
-        elif name == "bvhtree":
-            _import_bvhtree()
+        _IMPORT_CHECKS[name]()
         return True
     except Exception:  # ImportError, or a wheel whose shared library fails to load
         return False
@@ -388,8 +346,9 @@ def active_backend_name(backend: str = "auto") -> str | None:
 def make_occluder(triangles, backend: str = "auto", **kwargs) -> Occluder:
     """Build an occluder over world-space triangles (t, 3, 3).
 
-    ``backend``: "auto" (Embree if embreex imports, else mathutils BVHTree), "embree", "bvhtree"
-    or "numpy".  Extra keyword arguments go to the backend's constructor.
+    ``backend``: "auto" (Embree if embreex imports, else a registered fallback such as the
+    bridge's mathutils BVHTree), or a backend's name ("embree", "numpy", "bvhtree" once the
+    bridge is imported).  Extra keyword arguments go to the backend's constructor.
     """
     if backend == "auto":
         name = active_backend_name("auto")

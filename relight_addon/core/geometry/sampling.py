@@ -11,6 +11,9 @@ import numpy as np
 
 from ..scene import bilinear_point, quad_area_normal
 
+# Generalised golden ratios of the R2 low-discrepancy sequence (Roberts 2018).
+R2 = (0.7548776662466927, 0.5698402909980532)
+
 
 def jacobian_coefficients(corners: np.ndarray):
     """(j0, ju, jv) with J(u, v) = j0 + ju u + jv v for each patch (signed along its normal)."""

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ..geometry.raycast import ray_offset
 from ..geometry.sampling import area_uniform_uv, jacobian_coefficients
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
@@ -169,7 +170,7 @@ def cluster_visibility(tree: ClusterTree, h: Hierarchy, X, Y, occluder, rays: in
     pb, q = sample(Y)
     d = q - p
     ok = (np.einsum("ij,ij->i", d, h.normal[pa]) > 0) & (np.einsum("ij,ij->i", d, h.normal[pb]) < 0)
-    eps = 1e-7 * scale
+    eps = ray_offset(scale)
     blocked = occluder.segments_occluded(p + eps * h.normal[pa], q + eps * h.normal[pb]) & ok
     tried = np.bincount(np.repeat(np.arange(k), rays), ok, k)
     free = np.bincount(np.repeat(np.arange(k), rays), ok & ~blocked, k)

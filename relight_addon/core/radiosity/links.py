@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.formfactor import point_to_polygon
-from ..geometry.sampling import (area_uniform_uv, jacobian_coefficients, quadrature,
+from ..geometry.formfactor import point_kernel, point_to_polygon
+from ..geometry.raycast import ray_offset
+from ..geometry.sampling import (R2, area_uniform_uv, jacobian_coefficients, quadrature,
                                  stratified_unit_square)
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
@@ -37,8 +38,6 @@ _FAR_RATIO = 0.15
 _CHUNK_LINKS = 100_000
 _PARALLEL_LINKS = 20_000
 _THREADS = min(2, os.cpu_count() or 1)
-# Generalised golden ratios of the R2 sequence (Roberts 2018).
-_R2 = (0.7548776662466927, 0.5698402909980532)
 _CHUNK_POINTS = 100_000
 
 
@@ -77,6 +76,11 @@ class LinkSet:
                          for f in LinkSet._FIELDS))
 
 
+def visibility_types(free, partial) -> np.ndarray:
+    """VISIBLE / PARTIAL / INVISIBLE from a visible fraction and a partial flag per link."""
+    return np.where(partial, PARTIAL, np.where(free == 0, INVISIBLE, VISIBLE)).astype(np.int8)
+
+
 def facing(h: Hierarchy, r: np.ndarray, s: np.ndarray, scale: float) -> np.ndarray:
     """Conservative test that s has some part in front of r and r some part in front of s."""
     tol = _PLANE_TOL * scale
@@ -105,7 +109,7 @@ def initial_pairs(h: Hierarchy, receives: np.ndarray, sends: np.ndarray, scale: 
 
 def _offset_segments(h, r, s, p, q, scale):
     """Lift ray end points off their surfaces so that they do not hit their own element."""
-    eps = 1e-7 * scale
+    eps = ray_offset(scale)
     return p + eps * h.normal[r], q + eps * h.normal[s]
 
 
@@ -168,14 +172,6 @@ def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, ti
     free = np.where(tried > 0, 1.0 - n_blocked / np.maximum(tried, 1), 1.0)
     partial = (n_blocked > 0) & (n_blocked < tried)
     return F, spread, free, partial
-
-
-def _kernel(n_r, n_s, d):
-    """cos cos' / r^2 between points (without 1/pi), zero unless both face each other."""
-    dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
-    cr = d[:, 0] * n_r[:, 0] + d[:, 1] * n_r[:, 1] + d[:, 2] * n_r[:, 2]
-    cs = -(d[:, 0] * n_s[:, 0] + d[:, 1] * n_s[:, 1] + d[:, 2] * n_s[:, 2])
-    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
 
 
 def _mutually_in_front(h, r, s, p, q):
@@ -293,15 +289,15 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             # (Cranley-Patterson), so few rays still cover the source evenly.
             j = np.arange(len(ray_pt)) - np.repeat(np.cumsum(ray_count) - ray_count, ray_count)
             shift = chunk_rng.random((len(P), 2))[ray_pt]
-            xi_u = np.mod(j * _R2[0] + shift[:, 0], 1.0)[:, None]
-            xi_v = np.mod(j * _R2[1] + shift[:, 1], 1.0)[:, None]
+            xi_u = np.mod(j * R2[0] + shift[:, 0], 1.0)[:, None]
+            xi_v = np.mod(j * R2[1] + shift[:, 1], 1.0)[:, None]
             u, v = area_uniform_uv(None, xi_u, xi_v, tuple(j[ray_src] for j in jac))
             uu, vv = u[:, :1], v[:, :1]
             Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
                  + (uu * vv) * twist[ray_src])
             recv_el = lr[link_pt][ray_pt]
             Pr = P[ray_pt]
-            kernel = _kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
+            kernel = point_kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
             counts = kernel > 0
             p0, q0 = _offset_segments(h, recv_el, ray_src, Pr, Q, scale)
             with timer("visibility"):

@@ -14,7 +14,8 @@ import numpy as np
 from ..scene import SceneData
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .hierarchy import Hierarchy
-from .links import LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates
+from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
+                    visibility_types)
 from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
 
@@ -124,7 +125,7 @@ def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_a
     rho_r = rho_max[h.patch[r]]                 # errors as they show in the receiver's radiosity
     err_recv = rho_r * bs * links.spread * links.V
     err_src = rho_r * b_var[s] * links.F * links.V
-    shadow = (links.vis == 1) & (rho_r * bs * links.F > q.eps_bfv * b_scale)
+    shadow = (links.vis == PARTIAL) & (rho_r * bs * links.F > q.eps_bfv * b_scale)
     want_r = err_recv > q.eps_bf * b_scale
     want_s = err_src > q.eps_bf * b_scale
     can_r = ar / 4 >= min_area
@@ -240,8 +241,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     with timer("refine"):
         F, spread, free, partial = oracle_estimates(h, r0, s0, occluder, q.oracle_rays, rng,
                                                     scale, timer)
-    kept = LinkSet(r0, s0, F, free, np.where(partial, 1, np.where(free == 0, 2, 0)).astype(np.int8),
-                   spread)
+    kept = LinkSet(r0, s0, F, free, visibility_types(free, partial), spread)
     with timer("solve"):
         b_est, b_var, b_scale = estimate_radiosity(kept)
     fresh_r = fresh_s = np.zeros(0, np.int64)
@@ -255,7 +255,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                 with timer("refine"):
                     F, spread, free, partial = oracle_estimates(h, fresh_r, fresh_s, occluder,
                                                                 q.oracle_rays, rng, scale, timer)
-                vis = np.where(partial, 1, np.where(free == 0, 2, 0)).astype(np.int8)
+                vis = visibility_types(free, partial)
                 pending = LinkSet.concat([pending, LinkSet(fresh_r, fresh_s, F, free, vis, spread)])
             if pending.n == 0:
                 break

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.formfactor import point_to_polygon
-from ..geometry.sampling import area_uniform_uv
-from ..radiosity.links import _R2, _kernel
+from ..geometry.sampling import R2, area_uniform_uv
+from ..geometry.formfactor import point_kernel, point_to_polygon
+from ..geometry.raycast import ray_offset
 from ..scene import SceneData, bilinear_point, quad_area_normal
 
 _CHUNK_RAYS = 1 << 19     # rays in flight per call (two calls may run at once)
@@ -28,8 +28,8 @@ TABLE = 256            # area-uniform sample points kept per lamp patch
 def _lamp_tables(corners):
     """(m, TABLE, 3) area-uniform points of each lamp patch, R2 order."""
     j = np.arange(TABLE)
-    xu = np.broadcast_to(np.mod(0.5 + j * _R2[0], 1.0), (len(corners), TABLE))
-    xv = np.broadcast_to(np.mod(0.5 + j * _R2[1], 1.0), (len(corners), TABLE))
+    xu = np.broadcast_to(np.mod(0.5 + j * R2[0], 1.0), (len(corners), TABLE))
+    xv = np.broadcast_to(np.mod(0.5 + j * R2[1], 1.0), (len(corners), TABLE))
     u, v = area_uniform_uv(corners, xu, xv)
     return bilinear_point(corners[:, None], u, v)
 
@@ -49,7 +49,7 @@ def _cast(occluder, eps, origins, normals, table, lamp_normal, j0, start, count)
     Q = table[rows, (j0[:, None] + (s * (TABLE // max(S, 1)) + i)[None]) % TABLE].reshape(-1, 3)
     NP = np.repeat(normals, count, axis=0)
     NL = np.repeat(lamp_normal, count, axis=0)
-    w = _kernel(NP, NL, Q - P)
+    w = point_kernel(NP, NL, Q - P)
     blocked = occluder.segments_occluded(P + eps * NP, Q + eps * NL)
     counted = (w > 0).reshape(p, count)
     w = w.reshape(p, count)
@@ -76,7 +76,7 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
         return unocc, occ
     scale_k = np.ones(k) if exitance_scale is None else np.asarray(exitance_scale, float)
     lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
-    eps = 1e-6 * (float(np.linalg.norm(hi - lo)) or 1.0)
+    eps = ray_offset(np.linalg.norm(hi - lo))
     rng = np.random.default_rng(seed)
     corners = scene.corners[lamp_patches]
     _, lamp_normal = quad_area_normal(corners)

@@ -27,6 +27,13 @@ _SRGB_GAMMA = 2.4
 _SRGB_A = 0.055
 
 D65_XY = np.array([0.3127, 0.3290])
+# Rec. 709 luminance weights: a linear RGB value's "intensity" (seed 000 eq 4.1 and 4.2).
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def luminance(rgb):
+    """Rec. 709 luminance of linear RGB values (..., 3) -> (...)."""
+    return np.asarray(rgb) @ LUMINANCE
 
 
 def _float(x):

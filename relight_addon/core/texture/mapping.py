@@ -35,7 +35,7 @@ _PARAM_QUANTUM = float(1 << 30)
 # Texel map
 # ------------------------------------------------------------------------------------------
 @dataclass
-class ImageTexels:
+class CoveredTexels:
     """The covered texels of one image.
 
     shape        (H, W)
@@ -85,7 +85,7 @@ class TexelMap:
     def __len__(self):
         return len(self.images)
 
-    def __getitem__(self, k) -> ImageTexels:
+    def __getitem__(self, k) -> CoveredTexels:
         return self.images[k]
 
     @property
@@ -215,7 +215,7 @@ def rasterize_patches(uv, image_index, shapes, chunk_pairs: int = CHUNK_PAIRS) -
     return TexelMap(images)
 
 
-def _rasterize_image(uv, ids, h, w, chunk_pairs) -> ImageTexels:
+def _rasterize_image(uv, ids, h, w, chunk_pairs) -> CoveredTexels:
     n = h * w
     # Per-texel running state kept small (~14 bytes a texel): the owner (local patch index) and
     # its margin; (u, v) are recomputed for the final owners only.
@@ -323,7 +323,7 @@ def _rasterize_image(uv, ids, h, w, chunk_pairs) -> ImageTexels:
         uu, vv, _ = _invert(coef, local[sl], x.astype(np.float64), y.astype(np.float64))
         u[sl] = np.clip(uu, 0.0, 1.0)
         v[sl] = np.clip(vv, 0.0, 1.0)
-    return ImageTexels(
+    return CoveredTexels(
         shape=(h, w), texel_index=texel_index, patch=np.asarray(ids, np.int64)[local],
         u=u, v=v, coverage=(owner >= 0).reshape(h, w), n_overlap=int(np.count_nonzero(n_hits > 1)))
 
@@ -675,3 +675,44 @@ def _neighbour_sum_numpy(a):
             if dy != 1 or dx != 1:
                 acc += pv[dy:dy + h, dx:dx + w]
     return acc
+
+
+# ------------------------------------------------------------------------------------------
+# Neighbours and means
+# ------------------------------------------------------------------------------------------
+
+def adjacent_texel_pairs(texel_map: TexelMap) -> np.ndarray:
+    """Index pairs (into the concatenated texel arrays) of 4-adjacent covered texels."""
+    out = []
+    off = texel_map.offsets
+    for i, im in enumerate(texel_map.images):
+        if len(im) == 0:
+            continue
+        hh, ww = im.shape
+        grid = np.full(hh * ww, -1, np.int64)
+        grid[im.texel_index] = off[i] + np.arange(len(im))
+        grid = grid.reshape(hh, ww)
+        for a, b in ((grid[:, :-1], grid[:, 1:]), (grid[:-1, :], grid[1:, :])):
+            a, b = a.ravel(), b.ravel()
+            ok = (a >= 0) & (b >= 0)
+            out.append(np.stack([a[ok], b[ok]], 1))
+    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
+
+
+def neighbour_element_pairs(texel_map: TexelMap, element_ids) -> np.ndarray:
+    """Unique pairs of distinct elements owning 4-adjacent texels of the same image (so patch
+    edges that are continuous in UV count as neighbours, seams do not)."""
+    p = adjacent_texel_pairs(texel_map)
+    a, b = element_ids[p[:, 0]], element_ids[p[:, 1]]
+    ok = a != b
+    if not ok.any():
+        return np.zeros((0, 2), np.int64)
+    return np.unique(np.stack([np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])], 1), axis=0)
+
+
+def patch_means(texel_map: TexelMap, values, n_patches: int):
+    """Mean texel value (p, 3) and texel count (p,) of every patch."""
+    patch = texel_map.patch
+    cnt = np.bincount(patch, minlength=n_patches)
+    means = np.stack([np.bincount(patch, values[:, c], n_patches) for c in range(3)], axis=1)
+    return means / np.maximum(cnt, 1)[:, None], cnt

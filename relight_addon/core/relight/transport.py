@@ -1,0 +1,46 @@
+"""Leaf irradiances of a radiosity solution, with and without visibility, per lamp.
+
+The solution's leaf gather holds, for every (leaf, source) entry, the unoccluded form factor F
+and the form factor with visibility F V.  Gathering a per-lamp basis through each gives the
+occluded and unoccluded irradiance of every leaf, and restricted to lamp sources their direct
+parts: the four quantities the shadow-free pipeline divides (seed 000 eq 4.5-4.6).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..radiosity.solver import LeafSystem
+from ..texture.mapping import element_means, texel_elements
+
+
+class Transport:
+    """Leaf irradiances of a solution, unoccluded (F) and occluded (F V), all sources and lamps only."""
+
+    def __init__(self, sol):
+        h, g = sol.hierarchy, sol.gather
+        rho = sol.scene.rho
+        self.occ = sol.system
+        self.unocc = LeafSystem(h, g.leaf, g.source, g.F, rho)
+        self.unocc.U, self.unocc.W = sol.system.U, sol.system.W
+        lamp_src = sol.scene.lamp[h.patch[g.source]] >= 0
+        self.dir_occ = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.FV[lamp_src], rho)
+        self.dir_unocc = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.F[lamp_src], rho)
+
+    @staticmethod
+    def _per_lamp(system, basis):
+        k, L, _ = basis.shape
+        flat = np.moveaxis(basis, 0, 2).reshape(L, 3 * k)
+        return np.moveaxis(system.gather(flat).reshape(L, 3, k), 2, 0)   # (k, L, 3)
+
+    def irradiance(self, basis):
+        """Per lamp (k, L, 3): occluded, unoccluded, direct occluded, direct unoccluded."""
+        return (self._per_lamp(self.occ, basis), self._per_lamp(self.unocc, basis),
+                self._per_lamp(self.dir_occ, basis), self._per_lamp(self.dir_unocc, basis))
+
+
+def leaf_means(sol, tm, values):
+    """Mean of per-texel ``values`` (T, 3) over each leaf of the solution, and the texel counts
+    (leaves without texels take their ancestors' means)."""
+    h = sol.hierarchy
+    means, counts = element_means(values, texel_elements(h, tm), h.n, hierarchy=h)
+    return means[sol.leaves], counts[sol.leaves]
