@@ -5,6 +5,8 @@ import importlib
 
 import bpy
 
+from .base import RelightOperator
+
 # (import name, label shown to the user). numpy is Blender's own and always present.
 DEPENDENCIES = (
     ("numpy", "numpy"),
@@ -49,7 +51,7 @@ def ray_backend(found):
     return name or "none"
 
 
-class RELIGHT_OT_check_dependencies(bpy.types.Operator):
+class RELIGHT_OT_check_dependencies(RelightOperator, bpy.types.Operator):
     """Check which bundled libraries are available and which ray-casting backend is active"""
 
     bl_idname = "relight.check_dependencies"

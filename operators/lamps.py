@@ -13,6 +13,7 @@ import math
 
 import bpy
 
+from .base import RelightOperator
 from .settings import STATUS, status
 
 POWER0 = "relight_power0"
@@ -62,13 +63,24 @@ def match_lamp_powers(scene):
     return changed, warnings
 
 
-class RELIGHT_OT_match_lamp_powers(bpy.types.Operator):
+class RELIGHT_OT_match_lamp_powers(RelightOperator, bpy.types.Operator):
     """Set each real lamp's power from the exitance estimated from the photo, so that virtual
     objects are lit like the photographed surfaces (the relit textures do not change)"""
 
     bl_idname = "relight.match_lamp_powers"
     bl_label = "Match Lamp Powers to Photo"
     bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        from ..relight_addon.blender import write
+        st = status(context.scene)
+        if not st or not st.get("exitance_scale") or not write.has_relight_data(context.scene):
+            return "Run Precompute first: there is no estimate of the lamps to match"
+        return None
 
     def execute(self, context):
         changed, warnings = match_lamp_powers(context.scene)

@@ -1,23 +1,32 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Precompute / Restore / Clear operators.
+"""Precompute / Update / Restore / Clear operators.
 
 ``relight.precompute``: read the scene (main thread), solve the radiosity (bpy-free core),
-write the display maps and relit materials (main thread).
+write the display maps and relit materials (main thread).  ``relight.update`` does the same
+only when the scene changed since the last precompute, and keeps the radiosity mesh and links
+when only the photos changed.  Both share :class:`_PrecomputeRunner` (no operator calls
+another through ``bpy.ops``):
 
-* From a script (EXEC context) or in background mode it runs synchronously in ``execute()``.
+* From a script (EXEC context) or in background mode they run synchronously in ``execute()``.
 * Interactively (``invoke``) the solve runs in a worker thread; a modal timer polls it, shows
   the progress in the status bar and the window's progress indicator, and writes the results
   on the main thread when it is done.  Esc (or right click) sets a flag that the worker's
   progress callback turns into ``Cancelled``; nothing is written, so the scene is unchanged.
+  While a solve runs, neither operator can start another (their poll says why).
 """
 
 import threading
 import time
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty
+from bpy.props import EnumProperty
 
-from .settings import CORRECTION_ITEMS, LAST_RESULT, PRESET_ITEMS, store_status, update_overlay
+from .base import RelightOperator
+from .settings import (CORRECTION_ITEMS, PRESET_ITEMS, forget, last_result, remember, status,
+                       store_status, update_overlay)
+
+# The solve running in a worker thread (one at a time).
+_ACTIVE = {"job": None}
 
 
 def _modules():
@@ -34,9 +43,17 @@ def run_precompute(data, preset, correction="TEXEL", progress=None, reuse=None):
     return shadow_free(data, options, progress=progress, reuse=reuse)
 
 
-def reusable_solution(preset, correction):
+def user_message(ex) -> str:
+    """One sentence for an exception of the precompute: bad input (SceneError, ValueError)
+    says what is wrong; anything else is a bug and says so."""
+    if isinstance(ex, ValueError):          # SceneError is a ValueError
+        return str(ex)
+    return f"{type(ex).__name__}: {ex} (unexpected: please report it)"
+
+
+def reusable_solution(scene, preset, correction):
     """The last run's radiosity solution when Update may keep its mesh and links."""
-    result = LAST_RESULT.get("result")
+    result = last_result(scene)
     if result is None or correction == "ELEMENT" or result.options.preset != preset \
             or result.options.mode == "element":
         return None
@@ -44,16 +61,20 @@ def reusable_solution(preset, correction):
 
 
 def read_for_precompute(context):
-    """Read the scene as it is without our relit materials (they are emissive copies).
+    """Read the scene (relit materials are read through to the user's originals).
     Returns (scene_data, report, error message or None)."""
     read, write, _ = _modules()
-    with write.originals_swapped(context):
+    from ..relight_addon.core.scene import SceneError
+    try:
         data, report = read.read_scene(context)
+    except SceneError as ex:
+        return None, None, str(ex)
     if report.errors:
         return data, report, "; ".join(report.errors)
     if data.image is None or not (data.image >= 0).any():
         return data, report, "No face uses an image texture: nothing to relight"
-    textured = {report.groups[int(g)][0] for g in set(data.group[data.image >= 0].tolist())}
+    textured = {report.sources.get(report.groups[int(g)][0], report.groups[int(g)][0])
+                for g in set(data.group[data.image >= 0].tolist())}
     objs = [bpy.data.objects.get(n) for n in textured]
     if objs and all(o is not None and not write.slots_editable(o) for o in objs):
         return data, report, ("Every textured object is linked from a library (read-only): make "
@@ -117,83 +138,82 @@ class SolveJob:
         except precompute.Cancelled:
             self.state = "cancelled"
         except Exception as ex:  # reported on the main thread
-            self.error = f"{type(ex).__name__}: {ex}"
+            self.error = user_message(ex)
             self.state = "failed"
 
 
-class RELIGHT_OT_precompute(bpy.types.Operator):
-    """Solve the radiosity of the scene and write relightable materials (Esc cancels)"""
+def solve_running() -> bool:
+    job = _ACTIVE["job"]
+    return job is not None and job.state == "running"
 
-    bl_idname = "relight.precompute"
-    bl_label = "Precompute"
-    bl_options = {'REGISTER', 'UNDO'}
 
-    preset: EnumProperty(name="Preset", items=PRESET_ITEMS, default="medium",
-                         description="Quality preset (speed <-> accuracy)")
-    correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
-                             description="How the photographed shadows of the real lamps are "
-                                         "removed from the textures")
-    reuse_solution: BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'},
-                                 description="Keep the last run's radiosity mesh and links (set "
-                                             "by Update when only the photos changed)")
+class _PrecomputeRunner(RelightOperator):
+    """Read, solve (synchronously or in a worker thread with a modal timer), write."""
 
     _timer = None
     _job = None
     _data = None
     _read_report = None
-
+    _run_correction = "TEXEL"
     _t0 = 0.0
 
-    def _finish(self, context, data, read_report, solution):
-        _, write, _ = _modules()
-        summary = write.write_results(context, data, read_report, solution)
-        if hasattr(solution, "stats"):
-            from ..relight_addon.core.scene import scene_fingerprint
-            store_status(context.scene, solution, time.perf_counter() - self._t0, self.correction,
-                         scene_fingerprint(data), scene_fingerprint(data, textures=False))
-            LAST_RESULT["result"] = solution
-            settings = getattr(context.scene, "relight", None)
-            if settings is not None:
-                update_overlay(settings, context)
-        for w in summary["warnings"]:
-            self.report({'WARNING'}, w)
-        self.report({'INFO'}, f"Relight: {summary['materials']} material(s), "
-                              f"{summary['images']} image(s), {summary['lamps']} lamp(s)")
-        return {'FINISHED'}
+    @classmethod
+    def disabled_reason(cls, context):
+        if solve_running():
+            return "A precompute is running: wait for it, or press Esc to cancel it"
+        return super().disabled_reason(context)
 
-    def execute(self, context):
+    def _read(self, context, preset):
+        """(data, report) or None after reporting the error (nothing is changed)."""
         self._t0 = time.perf_counter()
         data, read_report, error = read_for_precompute(context)
-        error = error or memory_error(context, data, self.preset)
+        error = error or memory_error(context, data, preset)
         if error:
             self.report({'ERROR'}, error)
-            return {'CANCELLED'}
-        reuse = reusable_solution(self.preset, self.correction) if self.reuse_solution else None
+            return None
+        return data, read_report
+
+    def _solve_now(self, context, data, read_report, preset, correction, reuse=None):
         try:
-            solution = run_precompute(data, self.preset, self.correction, reuse=reuse)
+            solution = run_precompute(data, preset, correction, reuse=reuse)
         except Exception as ex:
-            self.report({'ERROR'}, f"Relight precompute failed: {type(ex).__name__}: {ex}")
+            self.report({'ERROR'}, f"Relight precompute failed: {user_message(ex)}")
             return {'CANCELLED'}
-        return self._finish(context, data, read_report, solution)
+        return self._finish(context, data, read_report, solution, correction)
 
-    def invoke(self, context, event):
+    def _solve_modal(self, context, data, read_report, preset, correction, reuse=None):
         if bpy.app.background or context.window is None:
-            return self.execute(context)
-        self._t0 = time.perf_counter()
-        data, read_report, error = read_for_precompute(context)
-        error = error or memory_error(context, data, self.preset)
-        if error:
-            self.report({'ERROR'}, error)
-            return {'CANCELLED'}
-        self._data, self._read_report = data, read_report
-        reuse = reusable_solution(self.preset, self.correction) if self.reuse_solution else None
-        self._job = SolveJob(data, self.preset, self.correction, reuse).start()
+            return self._solve_now(context, data, read_report, preset, correction, reuse)
+        self._data, self._read_report, self._run_correction = data, read_report, correction
+        self._job = _ACTIVE["job"] = SolveJob(data, preset, correction, reuse).start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 100)
         wm.modal_handler_add(self)
         self._status(context, "Relight: starting (Esc to cancel)")
         return {'RUNNING_MODAL'}
+
+    def _finish(self, context, data, read_report, solution, correction):
+        _, write, _ = _modules()
+        from ..relight_addon.core.scene import scene_fingerprint
+        scene = context.scene
+        summary = write.write_results(context, data, read_report, solution)
+        warnings = list(read_report.warnings)          # write_results appended its own
+        store_status(scene, solution, time.perf_counter() - self._t0, correction,
+                     remember(scene, solution), warnings, scene_fingerprint(data),
+                     scene_fingerprint(data, textures=False))
+        settings = getattr(scene, "relight", None)
+        if settings is not None:
+            update_overlay(settings, context)
+        for w in warnings:
+            self.report({'WARNING'}, w)
+        done = (f"Relight: {summary['materials']} material(s), {summary['images']} image(s), "
+                f"{summary['lamps']} lamp(s)")
+        if warnings:
+            self.report({'WARNING'}, f"{done}, {len(warnings)} warning(s): see the Relight panel")
+        else:
+            self.report({'INFO'}, done)
+        return {'FINISHED'}
 
     def _status(self, context, text):
         ws = getattr(context, "workspace", None)
@@ -207,6 +227,8 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         self._status(context, None)
+        if _ACTIVE["job"] is self._job:
+            _ACTIVE["job"] = None
 
     def modal(self, context, event):
         job = self._job
@@ -223,44 +245,43 @@ class RELIGHT_OT_precompute(bpy.types.Operator):
             return {'RUNNING_MODAL'}
         self._cleanup(context)
         if job.state == "done":
-            return self._finish(context, self._data, self._read_report, job.result)
+            return self._finish(context, self._data, self._read_report, job.result,
+                                self._run_correction)
         if job.state == "failed":
             self.report({'ERROR'}, f"Relight precompute failed: {job.error}")
         return {'CANCELLED'}
 
 
-class RELIGHT_OT_restore(bpy.types.Operator):
-    """Put the original materials back on the relit objects (the relit data is kept until Clear)"""
+class RELIGHT_OT_precompute(_PrecomputeRunner, bpy.types.Operator):
+    """Estimate the real lamps and reflectances from the photos and write relightable
+    materials: the photographed shadows are removed and each lamp gets a map (Esc cancels)"""
 
-    bl_idname = "relight.restore_originals"
-    bl_label = "Restore Originals"
+    bl_idname = "relight.precompute"
+    bl_label = "Precompute"
     bl_options = {'REGISTER', 'UNDO'}
 
-    def execute(self, context):
-        _, write, _ = _modules()
-        n = write.restore_originals(context)
-        self.report({'INFO'}, f"Relight: {n} material slot(s) restored")
-        return {'FINISHED'}
-
-
-class RELIGHT_OT_clear(bpy.types.Operator):
-    """Restore the original materials and remove every image and material Relight generated"""
-
-    bl_idname = "relight.clear"
-    bl_label = "Clear Relight Data"
-    bl_options = {'REGISTER', 'UNDO'}
+    preset: EnumProperty(name="Quality", items=PRESET_ITEMS, default="medium",
+                         description="Quality preset (speed <-> accuracy)")
+    correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
+                             description="How the photographed shadows of the real lamps are "
+                                         "removed from the textures")
 
     def execute(self, context):
-        _, write, _ = _modules()
-        s = write.clear_relight_data(context)
-        self.report({'INFO'}, f"Relight: removed {s['materials']} material(s) and "
-                              f"{s['images']} image(s)")
-        return {'FINISHED'}
+        read = self._read(context, self.preset)
+        if read is None:
+            return {'CANCELLED'}
+        return self._solve_now(context, *read, self.preset, self.correction)
+
+    def invoke(self, context, event):
+        read = self._read(context, self.preset)
+        if read is None:
+            return {'CANCELLED'}
+        return self._solve_modal(context, *read, self.preset, self.correction)
 
 
-class RELIGHT_OT_update(bpy.types.Operator):
-    """Re-run the precompute if the scene changed since the last one: nothing to do when only
-    lamp powers changed; the radiosity mesh and links are kept when only the photos changed;
+class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
+    """Bring the relit materials up to date: nothing to do when only lamp powers changed (the
+    drivers follow them); the radiosity mesh and links are kept when only the photos changed;
     everything is recomputed after geometry, lamp or quality changes"""
 
     bl_idname = "relight.update"
@@ -268,29 +289,91 @@ class RELIGHT_OT_update(bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def execute(self, context):
-        return self._run(context, "EXEC_DEFAULT")
+        return self._update(context, modal=False)
 
     def invoke(self, context, event):
-        return self._run(context, "INVOKE_DEFAULT")
+        return self._update(context, modal=True)
 
-    def _run(self, context, how):
+    def _update(self, context, modal):
         from ..relight_addon.core.scene import scene_fingerprint
-        from .settings import status
         _, write, _ = _modules()
-        settings = context.scene.relight
-        st = status(context.scene)
-        reuse = False
-        if st and write.has_relight_data() and st.get("preset") == settings.preset \
-                and st.get("correction") == settings.correction:
-            data, _, error = read_for_precompute(context)
-            if error is None and st.get("fingerprint") == scene_fingerprint(data):
+        scene = context.scene
+        settings = scene.relight
+        preset, correction = settings.preset, settings.correction
+        read = self._read(context, preset)
+        if read is None:
+            return {'CANCELLED'}
+        data, _ = read
+        st = status(scene)
+        reuse = None
+        if st and write.has_relight_data(scene) and st.get("preset") == preset \
+                and st.get("correction") == correction:
+            if st.get("fingerprint") == scene_fingerprint(data):
                 self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
                                       "precompute)")
                 return {'FINISHED'}
-            reuse = (error is None and st.get("geometry") == scene_fingerprint(data, False)
-                     and reusable_solution(settings.preset, settings.correction) is not None)
-        return bpy.ops.relight.precompute(how, preset=settings.preset,
-                                          correction=settings.correction, reuse_solution=reuse)
+            if st.get("geometry") == scene_fingerprint(data, False):
+                reuse = reusable_solution(scene, preset, correction)
+        run = self._solve_modal if modal else self._solve_now
+        return run(context, *read, preset, correction, reuse)
 
 
-classes = (RELIGHT_OT_precompute, RELIGHT_OT_update, RELIGHT_OT_restore, RELIGHT_OT_clear)
+class RELIGHT_OT_restore_originals(RelightOperator, bpy.types.Operator):
+    """Put your original materials back on the relit objects of this scene. The relit images
+    and materials are kept (to compare, or to reassign by hand); Clear removes them"""
+
+    bl_idname = "relight.restore_originals"
+    bl_label = "Restore Originals"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        _, write, _ = _modules()
+        if not write.relit_slot_count(context.scene):
+            return "Nothing to restore: no object shows this scene's relit materials"
+        return None
+
+    def execute(self, context):
+        _, write, _ = _modules()
+        n = write.restore_originals(context.scene)
+        self.report({'INFO'}, f"Relight: {n} material slot(s) restored")
+        return {'FINISHED'}
+
+
+class RELIGHT_OT_clear(RelightOperator, bpy.types.Operator):
+    """Restore your original materials, then delete the images and materials Relight made for
+    this scene and its precompute status (your own data is never deleted)"""
+
+    bl_idname = "relight.clear"
+    bl_label = "Clear Relight Data"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        _, write, _ = _modules()
+        if solve_running():
+            return "A precompute is running: wait for it, or press Esc to cancel it"
+        if not write.has_relight_data(context.scene) and status(context.scene) is None:
+            return "Nothing to clear: this scene has no Relight data"
+        return None
+
+    def execute(self, context):
+        _, write, _ = _modules()
+        s = write.clear_relight_data(context.scene)
+        forget(context.scene)
+        settings = getattr(context.scene, "relight", None)
+        if settings is not None:
+            update_overlay(settings, context)
+        self.report({'INFO'}, f"Relight: removed {s['materials']} material(s) and "
+                              f"{s['images']} image(s)")
+        return {'FINISHED'}
+
+
+classes = (RELIGHT_OT_precompute, RELIGHT_OT_update, RELIGHT_OT_restore_originals,
+           RELIGHT_OT_clear)

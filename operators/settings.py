@@ -1,14 +1,22 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Per-scene Relight settings (``scene.relight``) and the status of the last precompute.
+"""Per-scene Relight settings (``scene.relight``), the object role, and the state of the last
+precompute.
 
-The status lives in the scene's ID property ``relight_status`` (a dict), so it is saved with the
-.blend and follows undo like the relit materials it describes.
+* The status lives in the scene's ID property ``relight_status`` (a dict), so it is saved with
+  the .blend and follows undo like the relit materials it describes.
+* The last result (the radiosity solution, for Update and the overlays) is kept in memory per
+  scene, tied to the status by a run id: after undo, a reload or another file it is simply not
+  there (``load_post`` forgets every result), never another scene's or file's.
 """
 
+import uuid
+
 import bpy
+from bpy.app.handlers import persistent
 from bpy.props import EnumProperty
 
 STATUS = "relight_status"
+ROLE_PROPERTY = "relight_role"
 
 CORRECTION_ITEMS = (
     ("TEXEL", "Per Texel", "Remove the real lamps' shadows from the textures texel by texel "
@@ -26,6 +34,11 @@ PRESET_ITEMS = (
     ("ultra", "Ultra", "Slowest, most accurate"),
 )
 
+ROLE_ITEMS = (
+    ("relit", "Relit", "A photographed surface: its textures are relit"),
+    ("occluder", "Occluder", "Only casts shadows and blocks light (not relit, reflects nothing)"),
+    ("ignored", "Ignored", "Not read at all"),
+)
 
 OVERLAY_ITEMS = (
     ("NONE", "None", "No overlay"),
@@ -39,8 +52,40 @@ OVERLAY_ITEMS = (
     ("LINKS", "Links", "The links that carry the most light"),
 )
 
-# The last precompute's result, kept in memory for the overlays (not saved in the .blend).
-LAST_RESULT = {}
+# scene.session_uid -> (run id, ShadowFreeResult): the last result of each scene, in memory.
+_RESULTS = {}
+
+
+def last_result(scene):
+    """The result of ``scene``'s last precompute in this session, if its status still names it
+    (undo, reload or Clear make it unavailable)."""
+    entry = _RESULTS.get(scene.session_uid)
+    st = status(scene)
+    if entry is None or not st or st.get("run") != entry[0]:
+        return None
+    return entry[1]
+
+
+def remember(scene, result):
+    """Keep ``result`` as ``scene``'s last result; returns the run id stored in its status."""
+    run = uuid.uuid4().hex
+    _RESULTS[scene.session_uid] = (run, result)
+    return run
+
+
+def forget(scene):
+    """Drop ``scene``'s status and last result (Clear)."""
+    _RESULTS.pop(scene.session_uid, None)
+    if STATUS in scene:
+        del scene[STATUS]
+
+
+@persistent
+def _forget_all(*_args):
+    _RESULTS.clear()
+    if not bpy.app.background:
+        from ..relight_addon.blender import overlay
+        overlay.unregister_overlay()
 
 
 def update_overlay(settings, context):
@@ -51,7 +96,7 @@ def update_overlay(settings, context):
     from ..relight_addon.core.display.colormap import MODE_RATIO, MODE_VISIBILITY
     from ..relight_addon.core.display.elements import element_values, strongest_links
     overlay.clear_overlay_data()
-    result = LAST_RESULT.get("result")
+    result = last_result(context.scene)
     mode = settings.overlay
     if mode == "NONE" or result is None:
         overlay.unregister_overlay()
@@ -83,18 +128,20 @@ def status(scene):
     return st.to_dict() if hasattr(st, "to_dict") else st
 
 
-def store_status(scene, result, seconds, correction, fingerprint="", geometry=""):
-    """Write what the panel shows: counts, time, model misfit, lamps and their exitances (and
-    the scene fingerprint that Update compares)."""
+def store_status(scene, result, seconds, correction, run, warnings, fingerprint="",
+                 geometry=""):
+    """Write what the panel shows: counts, time, model misfit, lamps and their exitances, the
+    read and write warnings, and the scene fingerprint that Update compares."""
     stats = result.stats
     scale = [float(x) for x in result.exitance_scale]
     mean = sum(scale) / len(scale) if scale and sum(scale) > 0 else 1.0
     scene[STATUS] = {
-        "preset": result.options.preset, "correction": correction,
+        "preset": result.options.preset, "correction": correction, "run": run,
         "elements": int(stats.get("elements", 0)), "links": int(stats.get("links", 0)),
         "seconds": float(seconds), "misfit": float(stats.get("photo_misfit", float("nan"))),
         "lamps": list(result.solution.scene.lamp_names),
         "exitance_scale": scale, "relative_exitance": [s / mean for s in scale],
+        "warnings": [str(w) for w in warnings],
         "fingerprint": fingerprint, "geometry": geometry,
     }
 
@@ -104,12 +151,22 @@ classes = (RelightSceneSettings,)
 
 def attach():
     bpy.types.Scene.relight = bpy.props.PointerProperty(type=RelightSceneSettings)
+    bpy.types.Object.relight_role = EnumProperty(
+        name="Relight Role", items=ROLE_ITEMS, default="relit",
+        description="How Relight treats this object: relit photographed surface, occluder only, "
+                    "or ignored")
+    if _forget_all not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(_forget_all)
 
 
 def detach():
+    if _forget_all in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_forget_all)
     if hasattr(bpy.types.Scene, "relight"):
         del bpy.types.Scene.relight
-    LAST_RESULT.clear()
+    if hasattr(bpy.types.Object, "relight_role"):
+        del bpy.types.Object.relight_role
+    _RESULTS.clear()
     if not bpy.app.background:
         from ..relight_addon.blender import overlay
         overlay.unregister_overlay()

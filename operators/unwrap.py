@@ -12,13 +12,15 @@ are left alone.  Linked (library) and library-override meshes are read-only here
 import bpy
 import numpy as np
 
+from .base import RelightOperator
+
 UV_NAME = "RelightUV"
 
 
 def _targets(context):
-    objs = list(context.selected_objects)
+    objs = list(getattr(context, "selected_objects", None) or ())
     if not objs:
-        objs = list(context.visible_objects)
+        objs = list(getattr(context, "visible_objects", None) or ())
     return [o for o in objs if o.type == 'MESH']
 
 
@@ -80,13 +82,22 @@ def atlas_loop_uvs(mesh, matrix_world):
     return np.clip(loop_uv, 0.0, 1.0), int(bad.sum())
 
 
-class RELIGHT_OT_unwrap_missing(bpy.types.Operator):
+class RELIGHT_OT_unwrap_missing(RelightOperator, bpy.types.Operator):
     """Add an automatic UV atlas ("RelightUV", xatlas) to the selected (or, with nothing
     selected, the visible) mesh objects that have no UV map; other objects are left alone"""
 
     bl_idname = "relight.unwrap_missing"
     bl_label = "Unwrap Missing UVs"
     bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        if not any(len(o.data.uv_layers) == 0 for o in _targets(context)):
+            return "Every mesh (selected, or visible when nothing is selected) has a UV map"
+        return None
 
     def execute(self, context):
         try:

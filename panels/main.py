@@ -1,11 +1,14 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""RELIGHT_PT_main: the top panel of the sidebar "Relight" tab."""
+"""RELIGHT_PT_main: the sidebar "Relight" tab of the 3D viewport."""
 
 import functools
 import math
 import os
 
 import bpy
+
+# Warnings listed in the panel (all of them are in the Info editor and the status dict).
+PANEL_WARNINGS = 8
 
 
 @functools.lru_cache(maxsize=1)
@@ -36,8 +39,19 @@ def status_lines(scene):
         obj = bpy.data.objects.get(name)
         now = ""
         if obj is not None and obj.type == "LIGHT" and obj.data.get("relight_power0"):
-            now = f"  I = {obj.data.energy / obj.data['relight_power0']:.2f}"
-        lines.append((f"{name}: estimated {rel:.2f}x{now}", 'LIGHT_AREA'))
+            now = f", now {obj.data.energy / obj.data['relight_power0']:.2f}x"
+        lines.append((f"{name}: photo {rel:.2f}x its set power (lamps' mean = 1){now}",
+                      'LIGHT_AREA'))
+    return lines
+
+
+def warning_lines(scene, limit=PANEL_WARNINGS):
+    from ..operators.settings import status
+    st = status(scene) or {}
+    warnings = list(st.get("warnings", ()))
+    lines = warnings[:limit]
+    if len(warnings) > limit:
+        lines.append(f"... and {len(warnings) - limit} more (Info editor)")
     return lines
 
 
@@ -52,7 +66,19 @@ class RELIGHT_PT_main(bpy.types.Panel):
         layout = self.layout
         layout.label(text=f"Relight {addon_version()}", icon='LIGHT')
         layout.operator("relight.check_dependencies", icon='CHECKMARK')
-        layout.operator("relight.unwrap_missing", icon='UV')
+
+        box = layout.box()
+        box.label(text="Scene", icon='SCENE_DATA')
+        box.operator("relight.unwrap_missing", icon='UV')
+        obj = context.active_object
+        if obj is not None and obj.type in {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'} \
+                and hasattr(obj, "relight_role"):
+            raw = obj.get("relight_role")
+            if isinstance(raw, str):          # set as a plain custom property by a script
+                box.label(text=f"{obj.name}: role '{raw}' (custom property)", icon='OBJECT_DATA')
+            else:
+                box.prop(obj, "relight_role", text=f"{obj.name} Role")
+
         settings = getattr(context.scene, "relight", None)
         if settings is not None:
             col = layout.column(align=True)
@@ -63,7 +89,6 @@ class RELIGHT_PT_main(bpy.types.Panel):
             op.preset = settings.preset
             op.correction = settings.correction
             row.operator("relight.update", icon='FILE_REFRESH')
-        if settings is not None:
             layout.prop(settings, "overlay")
         lines = status_lines(context.scene)
         if lines:
@@ -71,6 +96,13 @@ class RELIGHT_PT_main(bpy.types.Panel):
             for text, icon in lines:
                 box.label(text=text, icon=icon)
             box.operator("relight.match_lamp_powers", icon='LIGHT_SUN')
+        warnings = warning_lines(context.scene)
+        if warnings:
+            box = layout.box()
+            box.label(text="Warnings", icon='ERROR')
+            col = box.column(align=True)
+            for text in warnings:
+                col.label(text=text)
         row = layout.row(align=True)
         row.operator("relight.restore_originals", icon='LOOP_BACK')
         row.operator("relight.clear", icon='TRASH')

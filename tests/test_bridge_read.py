@@ -211,11 +211,16 @@ def test_unsupported_lights_and_no_lamps():
     dark.data.spread = 0.5
     scene, report = read_scene(bpy.context)
     assert any("'dark'" in w and "spread" in w for w in report.warnings)
-    assert any("'dark'" in w and "no power" in w for w in report.warnings)
-    assert report.lamps == 0 and report.errors and "lamp" in report.errors[0]
+    # a lamp at power 0 is kept (off in the photo, computed at a reference power of 1 W) ...
+    assert any("'dark'" in w and "off" in w for w in report.warnings)
+    assert report.lamps == 1 and scene.lamp_intensity.tolist() == [0.0]
+    assert np.allclose(scene.emission[scene.lamp == 0], 1.0)       # 1 W over 1 m^2
+    assert report.lamp_sources[0]["power_ref"] == 1.0
+    # ... but with every lamp off there is nothing the photo can be explained by
+    assert report.errors and "Every lamp is off" in report.errors[0]
     assert any("'P'" in w and "not supported" in w for w in report.warnings)
     assert any("'S'" in w for w in report.warnings)
-    assert scene.n_patches == 1
+    assert scene.n_patches == 2           # the floor and the off lamp
 
 
 def _render_setup():

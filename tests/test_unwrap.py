@@ -125,7 +125,10 @@ def test_unwrap_only_selected_and_idempotent(scene):
     assert bpy.ops.relight.unwrap_missing() == {'FINISHED'}
     assert "RelightUV" in a.data.uv_layers and len(b.data.uv_layers) == 0
     before = _uv_triangles(a.data, "RelightUV")[0].copy()
-    assert bpy.ops.relight.unwrap_missing() == {'FINISHED'}     # already has a UV map: no-op
+    # already has a UV map: the operator is disabled, and says why
+    assert not bpy.ops.relight.unwrap_missing.poll()
+    with pytest.raises(RuntimeError, match="has a UV map"):
+        bpy.ops.relight.unwrap_missing()
     assert len(a.data.uv_layers) == 1
     assert np.array_equal(_uv_triangles(a.data, "RelightUV")[0], before)
 

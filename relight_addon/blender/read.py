@@ -89,6 +89,11 @@ class ReadReport:
     warnings: list = field(default_factory=list)
     errors: list = field(default_factory=list)
     viewpoint: tuple | None = None
+    # per lamp index: {"name", "object", "kind" ("light" | "emissive"), "power_photo" (its power
+    # as read), "power_ref" (the power its emission here stands for)}
+    lamp_sources: list = field(default_factory=list)
+    sources: dict = field(default_factory=dict)   # label -> object whose slots it uses
+    uv_maps: dict = field(default_factory=dict)   # (label, material) -> UV map read
 
     @property
     def ok(self) -> bool:
@@ -101,8 +106,9 @@ class ReadReport:
 
 # -- colour ------------------------------------------------------------------------------------
 
-def image_texels(image):
-    """Linear RGB texels (h, w, 3) float32 of a bpy image, or None when it has no pixels."""
+def image_texels(image, report=None):
+    """Linear RGB texels (h, w, 3) float32 of a bpy image, or None when it has no pixels.
+    NaN, infinite and negative texels (float images) are read as 0, with a warning."""
     try:
         w, h = image.size[:]
     except Exception:
@@ -120,7 +126,15 @@ def image_texels(image):
     space = image.colorspace_settings.name
     if not image.is_float and space not in _LINEAR_SPACES:
         rgb = srgb_to_linear(rgb)
-    return np.ascontiguousarray(rgb, dtype=np.float32)
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    bad = ~(np.isfinite(rgb) & (rgb >= 0))
+    if bad.any():
+        texels = int(bad.any(axis=-1).sum())
+        rgb[bad] = 0.0
+        if report is not None:
+            report.warn(f"Image '{image.name}': {texels} texel(s) are NaN, infinite or negative; "
+                        "they are read as black")
+    return rgb
 
 
 # -- materials ---------------------------------------------------------------------------------
@@ -188,6 +202,8 @@ class _MaterialInfo:
 
 
 def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -> _MaterialInfo:
+    """What the reader needs of a material (``mat`` is the user's material: relit copies are
+    resolved by the caller, see :func:`user_material`)."""
     black = np.zeros(3)
     if mat is None:
         return _MaterialInfo(np.full(3, DEFAULT_RHO), black)
@@ -245,7 +261,7 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
     image = getattr(image, "original", image) or image
     key = image.name
     if key not in images:
-        texels = image_texels(image)
+        texels = image_texels(image, report)
         if texels is None:
             images[key] = None
             report.warn(f"Image '{image.name}' of material '{name}' has no pixels "
@@ -347,9 +363,11 @@ def _area_light_polygon(light):
     return np.stack([centre, ring[i], ring[i + 1], ring[(i + 2)]], axis=1)
 
 
-def area_light_exitance(light, area: float) -> np.ndarray:
-    """Exitance (W/m^2, RGB) of a Blender area light of world-space area ``area``."""
-    power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+def area_light_exitance(light, area: float, energy=None) -> np.ndarray:
+    """Exitance (W/m^2, RGB) of a Blender area light of world-space area ``area``, at its own
+    power or at ``energy``."""
+    energy = float(light.energy if energy is None else energy)
+    power = energy * 2.0 ** float(getattr(light, "exposure", 0.0))
     colour = _rgb(light.color)
     if getattr(light, "use_temperature", False):
         colour = colour * _rgb(light.temperature_color)
@@ -361,12 +379,51 @@ def area_light_exitance(light, area: float) -> np.ndarray:
 
 # -- the reader --------------------------------------------------------------------------------
 
-def _role(obj, roles):
+def user_material(mat):
+    """The user's material behind a slot's material: a relit copy (our Emission material) is
+    read through to the original it keeps (write.py)."""
+    from .write import original_material
+    return original_material(getattr(mat, "original", mat) or mat) if mat is not None else None
+
+
+def object_role(obj, roles=None):
+    """"relit" / "occluder" / "ignored" of an object (the ``roles`` argument, a string custom
+    property ``relight_role`` set from a script, or the add-on's Object property), or None when
+    the value is unknown."""
     if roles and obj.name in roles:
         role = roles[obj.name]
     else:
-        role = obj.get(ROLE_PROPERTY, "relit") if hasattr(obj, "get") else "relit"
+        raw = obj.get(ROLE_PROPERTY) if hasattr(obj, "get") else None
+        if isinstance(raw, str):    # a plain custom property (scripts)
+            role = raw
+        else:                       # the add-on's enum property, when it is registered
+            role = getattr(obj, ROLE_PROPERTY, "relit")
     return role if role in ROLES else None
+
+
+def _has_role(obj, roles):
+    return (roles and obj.name in roles) or object_role(obj) not in (None, "relit")
+
+
+def reference_power(light) -> float:
+    """The power a lamp that is off at precompute time is computed at: the highest value its
+    ``energy`` is keyframed to, or 1 (W, or W/m^2 for a sun).  Its driver divides by it."""
+    best = 0.0
+    ad = getattr(light, "animation_data", None)
+    action = getattr(ad, "action", None) if ad is not None else None
+    if action is not None:
+        curves = list(getattr(action, "fcurves", ()) or ())
+        if not curves:                              # Blender 4.4+: slotted actions
+            try:
+                from bpy_extras import anim_utils
+                bag = anim_utils.action_get_channelbag_for_slot(action, ad.action_slot)
+                curves = list(bag.fcurves) if bag is not None else []
+            except Exception:
+                curves = []
+        for fc in curves:
+            if fc.data_path == "energy":
+                best = max([best] + [float(k.co[1]) for k in fc.keyframe_points])
+    return best if best > 0 else 1.0
 
 
 def read_scene(context_or_scene, depsgraph=None, roles=None):
@@ -385,6 +442,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
     mat_cache: dict = {}
     corners, rho, emission, lamp, occluder, group, uvs, image_idx = ([] for _ in range(8))
     lamp_names: list = []
+    lamp_intensity: list = []    # per lamp: its power in the photo over the power it is read at
     emissive_lamp: dict = {}     # (object, material) -> lamp index
 
     labels_seen: dict = {}
@@ -402,9 +460,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             label = f"{label}.{labels_seen[label]}"
         else:
             labels_seen[label] = 0
-        role_of = parent if parent is not None and (
-            (roles and parent.name in roles) or ROLE_PROPERTY in parent) else obj
-        role = _role(role_of, roles)
+        role_of = parent if parent is not None and _has_role(parent, roles) else obj
+        role = object_role(role_of, roles)
         if role is None:
             report.warn(f"Object '{role_of.name}': unknown {ROLE_PROPERTY} "
                         f"'{role_of.get(ROLE_PROPERTY)}', read as relit")
@@ -434,12 +491,23 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             if not area > 0:
                 report.warn(f"Light '{label}' has zero area and is ignored")
                 continue
-            exitance = area_light_exitance(light, area)
+            # A lamp that is off in the photo still gets its basis (light transport is linear),
+            # computed at a reference power; the photo sees it at intensity 0.
+            power = float(light.energy)
+            power_ref = power if power > 0 else reference_power(light)
+            exitance = area_light_exitance(light, area, power_ref)
             if not np.any(exitance > 0):
-                report.warn(f"Light '{label}' has no power and is ignored")
+                report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
                 continue
+            if power <= 0:
+                report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
+                            f"its map is computed at {power_ref:g} W, so raising its power "
+                            "switches it on")
             k = len(lamp_names)
             lamp_names.append(label)
+            lamp_intensity.append(power / power_ref)
+            report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
+                                        "power_photo": power, "power_ref": power_ref})
             q = len(quads)
             corners.append(quads)
             rho.append(np.zeros((q, 3)))
@@ -470,6 +538,11 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             co = _transform(matrix, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
             loop_vert = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
             loops, poly = _mesh_faces(me, report)
+            finite = np.isfinite(co[loop_vert[loops]]).all(axis=(1, 2))
+            if not finite.all():
+                report.warn(f"Object '{label}': {int((~finite).sum())} face(s) have non-finite "
+                            "vertex coordinates (NaN or infinite) and are skipped")
+                loops, poly = loops[finite], poly[finite]
             if np.linalg.det(matrix[:3, :3]) < 0:
                 loops = loops[:, [0, 3, 2, 1]]  # mirrored: keep the winding (a, b, c, c) -> (a, c, c, b)
                 tri = loops[:, 1] == loops[:, 2]
@@ -487,9 +560,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             uv_cache: dict = {}
             for mi in np.unique(mat_index):
                 sel = mat_index == mi
-                mat = slots[int(mi)].material if 0 <= mi < len(slots) else None
-                if mat is not None:
-                    mat = getattr(mat, "original", mat) or mat
+                mat = user_material(slots[int(mi)].material) if 0 <= mi < len(slots) else None
                 mkey = (mat.name if mat is not None else None)
                 if mkey not in mat_cache:
                     mat_cache[mkey] = _material_info(mat, report, images, role == "relit")
@@ -504,6 +575,10 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                     if key not in emissive_lamp:
                         emissive_lamp[key] = len(lamp_names)
                         lamp_names.append(f"{label}/{mkey}")
+                        lamp_intensity.append(1.0)
+                        report.lamp_sources.append({"name": f"{label}/{mkey}", "object": obj.name,
+                                                    "material": mkey, "kind": "emissive",
+                                                    "power_photo": 1.0, "power_ref": 1.0})
                         report.lamps += 1
                     obj_lamp[sel] = emissive_lamp[key]
                     obj_em[sel] = np.pi * info.emission_radiance
@@ -517,12 +592,18 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                 if info.uv_map and layer.name != info.uv_map:
                     report.warn(f"Object '{label}' has no UV map '{info.uv_map}' used by "
                                 f"material '{mkey}': '{layer.name}' is read instead")
+                report.uv_maps[(label, mkey or "")] = layer.name
                 if layer.name not in uv_cache:
                     uv_cache[layer.name] = _uv_array(layer, n_loops)
                 obj_uv[sel] = uv_cache[layer.name][loops[sel]]
                 if info.image_node is not None:
                     names = list(k for k, v in images.items() if v is not None)
                     obj_img[sel] = names.index(info.image_node)
+            report.sources[label] = obj.name
+            if parent is not None and np.any(obj_img >= 0):
+                report.warn(f"'{label}' is an instance of '{obj.name}': instances share its "
+                            "texture, so they all show the light of one place (Make Instances "
+                            "Real gives each its own)")
             corners.append(obj_corners)
             rho.append(obj_rho)
             emission.append(obj_em)
@@ -552,15 +633,26 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
         emission=cat(emission, (0, 3), np.float64), lamp=cat(lamp, (0,), np.int32),
         lamp_names=lamp_names, occluder=cat(occluder, (0,), bool), group=cat(group, (0,), np.int32),
         uv=cat(uvs, (0, 4, 2), np.float64), image=cat(image_idx, (0,), np.int32),
-        images=image_list, viewpoint=viewpoint)
+        images=image_list, viewpoint=viewpoint, lamp_intensity=np.array(lamp_intensity, float))
     report.zero_area_skipped = data.dropped_degenerate
     report.duplicates_skipped = data.dropped_duplicate
+    for dropped, kept in data.duplicate_groups:
+        a, b = report.groups[int(dropped)][0], report.groups[int(kept)][0]
+        if a == b:
+            report.warn(f"'{a}' has faces at the same place as others of its own: they are "
+                        "counted once")
+        else:
+            report.warn(f"'{a}' has faces at the same place as '{b}' (a duplicate?): they are "
+                        "counted once, and the copies z-fight in renders: delete or move one")
     report.patches = data.n_patches
     if report.zero_area_skipped:
         report.warn(f"{report.zero_area_skipped} zero-area face(s) skipped")
     if data.n_patches == 0 or not np.any(data.lamp >= 0):
         if not lamp_names:
             report.errors.append("The scene has no lamps: add an area light or an emissive face")
+    if lamp_names and not any(x > 0 for x in lamp_intensity):
+        report.errors.append("Every lamp is off (power 0): set the real lamps to their power in "
+                             "the photo before Precompute (then animate them)")
     if not np.any(data.occluder) and data.n_patches == 0:
         report.errors.append("The scene has no usable faces")
     return data, report

@@ -11,33 +11,33 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
 * ``T_final`` is written as ``"<image>.relight.T"`` (half float, Non-Color = linear, unclamped
   above 1, packed) and replaces the image of the relit material's copy of the texture node
   (named ``"T"``); the original image is never modified.
-* Per-lamp leaf radiosity is turned into element-vertex values and interpolated per texel
-  (:func:`vertex_interpolate` twin: ``vertex_values`` once per lamp, then per image).
-* ``D`` is floored at ``DISPLAY_EPS * max(D)`` (per channel, max over every written texel):
-  where ``D`` is below it every ``M_k`` is 0 (unlit texels render black), never NaN/Inf.
-* Seams are dilated (``SEAM_PIXELS`` rings) so bilinear filtering does not pull in black.
 * Images ``"<image>.relight.<lamp>"``: float, Non-Color, RGBA (alpha 1), half-float OpenEXR
   (ZIP), packed into the .blend; their user is the relit material.  Half floats quantise M_k
-  (spacing 2**-11 just below 1), so the written maps sum to 1 within about 1e-3, while
-  :func:`display_maps` sums to 1 within float rounding.
+  (spacing 2**-11 just below 1), so the written maps sum to 1 within about 1e-3.
 * Materials ``"<material>.relight"``: a copy of the original whose tree keeps only the original
-  Image Texture node and what feeds its Vector input (UV Map node, mapping...), plus
+  Image Texture node and what feeds its Vector input (UV Map node, mapping...; a UV Map node
+  names the UV map the reader actually used, e.g. "RelightUV" after Unwrap Missing UVs), plus
   ``T * sum_k(I_k * M_k)`` -> Emission (strength 1) -> Material Output.  ``I_k`` is a Value
   node whose output is driven by the SCRIPTED simple expression ``p / P0`` (``p`` = the light
-  data's ``energy``, ``P0`` its value at precompute time written as a literal); simple
-  expressions evaluate with Python auto-run off and without the extension.  ``P0`` is also
-  kept as ``light.data["relight_power0"]``.  Only ``energy`` is tracked: colour / exposure
-  changes of a light are not followed.  Emissive-face lamps have no light to follow: their
-  ``I_k`` is a constant 1 (reported).
-* Objects: slots holding a relit material get the ``.relight`` copy; the original names are
-  kept in the object property ``relight_original_materials`` (one name per slot, "" for
-  slots left alone) for :func:`restore_originals`.
-* Every generated datablock carries the ID property ``relight_generated = 1`` so
-  :func:`clear_relight_data` removes exactly those, and nothing else.
+  data's ``energy``, ``P0`` the power its map was computed at, written as a literal: its power
+  at precompute time, or a reference power for a lamp that was off then); simple expressions
+  evaluate with Python auto-run off and without the extension.  ``P0`` is also kept as
+  ``light.data["relight_power0"]``.  Only ``energy`` is tracked: colour / exposure changes of a
+  light are not followed.  Emissive-face lamps have no light to follow: their ``I_k`` is a
+  constant 1 (reported).
+* The user's material stays alive: the relit copy holds it in the ID property
+  ``relight_original`` (an ID reference counts as a user, so it survives save and reopen), and
+  the reader reads through a relit material to it.
+* Objects: slots holding a relit material get the ``.relight`` copy.  A library-override
+  object whose slot lives in its linked mesh gets an object-level slot instead (recorded on the
+  relit material, undone by Restore); linked objects are left alone.
+* Every generated datablock carries ``relight_generated = 1`` and the key of the scene it was
+  made for (``relight_scene``; the scene keeps its key in ``relight_id``), so Restore and Clear
+  act on that scene's results only, and on nothing else.
 """
 from __future__ import annotations
 
-from contextlib import contextmanager
+import uuid
 
 import bpy
 import numpy as np
@@ -46,7 +46,11 @@ from ..core.relight.maps import DISPLAY_EPS, SEAM_PIXELS, map_images, ratio_maps
 from ..core.texture.mapping import rasterize_patches
 
 GENERATED = "relight_generated"
-ORIGINALS = "relight_original_materials"
+SCENE_KEY = "relight_scene"         # on generated datablocks: the key of their scene
+SCENE_ID = "relight_id"             # on a scene: its key
+SCENE_OWNER = "relight_id_owner"    # on a scene: the name it had when the key was made
+ORIGINAL = "relight_original"       # on a relit material: the user's material (keeps it alive)
+OBJECT_LINKS = "relight_object_slots"  # on a relit material: override objects whose slot we linked
 POWER0 = "relight_power0"
 HALF_MAX = 65504.0
 T_NODE = "T"
@@ -82,6 +86,46 @@ def _is_generated(idb) -> bool:
     return bool(idb.get(GENERATED, 0))
 
 
+def _tag(idb, key):
+    idb[GENERATED] = 1
+    idb[SCENE_KEY] = key
+
+
+def scene_key(scene, create=False):
+    """The key that ties generated data to ``scene`` (made on the first write; ``create`` is
+    only allowed where ID properties may be written, never in a poll or a draw).  A copied
+    scene (Full Copy) carries its original's key: the key stays with the scene that still has
+    the name it was made under, and the copy gets its own on its first write."""
+    key = scene.get(SCENE_ID)
+    if key is not None and scene.get(SCENE_OWNER) != scene.name:
+        if any(s != scene and s.get(SCENE_ID) == key and s.get(SCENE_OWNER) == s.name
+               for s in bpy.data.scenes):
+            key = None                               # a copy: not its key
+        elif create:
+            scene[SCENE_OWNER] = scene.name          # renamed
+    if key is None and create:
+        key = scene[SCENE_ID] = uuid.uuid4().hex
+        scene[SCENE_OWNER] = scene.name
+    return key
+
+
+def _ours(idb, key) -> bool:
+    return key is not None and _is_generated(idb) and idb.get(SCENE_KEY) == key
+
+
+def original_material(mat):
+    """The user's material behind a relit one (``mat`` itself when it is not relit)."""
+    for _ in range(8):                       # a relit material is never relit again; be safe
+        if mat is None or not _is_generated(mat):
+            return mat
+        nxt = mat.get(ORIGINAL)
+        if nxt is None:                      # relit data written before the reference existed
+            nxt = bpy.data.materials.get(mat.name[: -len(MAT_SUFFIX)]) \
+                if mat.name.endswith(MAT_SUFFIX) else None
+        mat = nxt
+    return None
+
+
 def _float_image(name, rgb):
     hh, ww = rgb.shape[:2]
     img = bpy.data.images.new(name, ww, hh, alpha=True, float_buffer=True)
@@ -99,8 +143,9 @@ class _HalfWriter:
     and deleted; the image keeps the relative path ``//relight/<name>.exr`` for unpacking.
     Linear EXR output gets no view transform (values above 1 round-trip unchanged)."""
 
-    def __init__(self):
+    def __init__(self, key):
         import tempfile
+        self.key = key
         self.dir = tempfile.mkdtemp(prefix="relight_")
         self.scene = bpy.data.scenes.new("relight_tmp_exr_settings")
         s = self.scene.render.image_settings
@@ -131,7 +176,7 @@ class _HalfWriter:
             img = _float_image(name, rgb)
             img.file_format = "OPEN_EXR"
             img.pack()
-        img[GENERATED] = 1
+        _tag(img, self.key)
         return img
 
     def close(self):
@@ -172,12 +217,14 @@ def _add_driver(socket, light_data, p0, label):
     return fc
 
 
-def _relit_material(orig, image_name, maps, lamps, t_image=None):
+def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=None):
     """maps: list of bpy images (one per lamp); lamps: list of (name, light data or None, P0);
-    t_image: the shadow-free texture T_final (None: the original image is T)."""
+    t_image: the shadow-free texture T_final (None: the original image is T); uv_map: the UV
+    map the reader used for this material (its UV Map nodes are pointed at it)."""
     mat = orig.copy()
     mat.name = orig.name + MAT_SUFFIX
-    mat[GENERATED] = 1
+    _tag(mat, key)
+    mat[ORIGINAL] = orig
     if _LEGACY_USE_NODES:
         mat.use_nodes = True
     tree = mat.node_tree
@@ -199,6 +246,10 @@ def _relit_material(orig, image_name, maps, lamps, t_image=None):
         vec_src = tex.inputs["Vector"].links[0].from_socket
     if t_image is not None:       # the copy's node only: the original material keeps its image
         tex.image = t_image
+    if uv_map:
+        for node in keep:
+            if node.bl_idname == "ShaderNodeUVMap" and node.uv_map != uv_map:
+                node.uv_map = uv_map
     tex.name, tex.label = T_NODE, "T_final" if t_image is not None else "T (original)"
     x0 = tex.location.x + 300
     y0 = tex.location.y
@@ -253,76 +304,78 @@ def _relit_material(orig, image_name, maps, lamps, t_image=None):
     return mat
 
 
-@contextmanager
-def originals_swapped(context=None):
-    """Temporarily put the original materials back (e.g. to read the scene), then re-apply."""
-    swaps = _swap_to_originals()
-    try:
-        yield swaps
-    finally:
-        for slot_owner, i, relit in swaps:
-            slot_owner.material_slots[i].material = relit
+# -- scene-scoped state ------------------------------------------------------------------------
 
-
-def _swap_to_originals():
-    swaps = []
-    for obj in bpy.data.objects:
-        names = obj.get(ORIGINALS)
-        if names is None:
+def _scene_objects(scene):
+    """The objects of ``scene``, and those of the collections its objects instance."""
+    seen, todo, out = set(), list(scene.objects), []
+    while todo:
+        obj = todo.pop()
+        if obj.name_full in seen:
             continue
+        seen.add(obj.name_full)
+        out.append(obj)
+        coll = obj.instance_collection if obj.instance_type == "COLLECTION" else None
+        if coll is not None:
+            todo.extend(coll.all_objects)
+    return out
+
+
+def _relit_slots(scene):
+    """(object, slot index, relit material) for every slot of ``scene``'s objects that holds a
+    relit material."""
+    for obj in _scene_objects(scene):
         for i, slot in enumerate(obj.material_slots):
-            if i >= len(names) or not names[i]:
-                continue
-            cur = slot.material
-            orig = bpy.data.materials.get(names[i])
-            if cur is not None and _is_generated(cur) and orig is not None:
-                slot.material = orig
-                swaps.append((obj, i, cur))
-    return swaps
+            if slot.material is not None and _is_generated(slot.material):
+                yield obj, i, slot.material
 
 
-def restore_originals(context=None) -> int:
-    """Put the original materials back in every slot that holds a relit one; forget the record.
-    Returns the number of slots restored.  Relit materials and images are not deleted."""
-    swaps = _swap_to_originals()
-    for obj in bpy.data.objects:
-        if ORIGINALS in obj:
-            del obj[ORIGINALS]
-    # Slots of objects without a record (e.g. sharing a mesh with a relit object).
-    count = len(swaps)
-    for obj in bpy.data.objects:
-        for slot in obj.material_slots:
-            mat = slot.material
-            if mat is not None and _is_generated(mat) and mat.name.endswith(MAT_SUFFIX):
-                orig = bpy.data.materials.get(mat.name[: -len(MAT_SUFFIX)])
-                if orig is not None and not _is_generated(orig):
-                    slot.material = orig
-                    count += 1
+def restore_originals(scene) -> int:
+    """Put the original materials back in every slot of ``scene``'s objects that holds a relit
+    material (an override object's slot goes back to its mesh).  Returns the number of slots
+    restored.  Relit materials and images are kept until Clear (to compare, or to reassign by
+    hand)."""
+    count = 0
+    for obj, i, mat in list(_relit_slots(scene)):
+        slot = obj.material_slots[i]
+        orig = original_material(mat)
+        if orig is None:
+            continue
+        slot.material = orig
+        if obj.name in mat.get(OBJECT_LINKS, ()) and slot.link == "OBJECT":
+            slot.link = "DATA"
+        count += 1
     return count
 
 
-def clear_relight_data(context=None) -> dict:
-    """Restore the originals, then remove every generated material and image and the stored
-    properties (``relight_power0`` on lights).  Nothing else is touched."""
-    restored = restore_originals(context)
-    mats = [m for m in bpy.data.materials if _is_generated(m)]
-    imgs = [im for im in bpy.data.images if _is_generated(im)]
+def clear_relight_data(scene) -> dict:
+    """Restore ``scene``'s originals, then remove the materials and images generated for it (and
+    generated ones nothing uses any more, e.g. copies made by a Full Copy of the scene) and the
+    stored powers of its lights.  Other scenes' results and the user's data are untouched."""
+    key = scene_key(scene)
+    restored = restore_originals(scene)
+    mats = [m for m in bpy.data.materials if _ours(m, key) or (_is_generated(m) and m.users == 0)]
     for m in mats:
         bpy.data.materials.remove(m)
+    imgs = [im for im in bpy.data.images if _ours(im, key) or (_is_generated(im) and im.users == 0)]
     for im in imgs:
         bpy.data.images.remove(im)
     lights = 0
-    for light in bpy.data.lights:
-        if POWER0 in light:
-            del light[POWER0]
+    for obj in scene.objects:
+        if obj.type == "LIGHT" and POWER0 in obj.data and _editable(obj.data):
+            del obj.data[POWER0]
             lights += 1
     return {"restored_slots": restored, "materials": len(mats), "images": len(imgs),
             "lights": lights}
 
 
-def has_relight_data() -> bool:
-    return any(_is_generated(m) for m in bpy.data.materials) or \
-        any(_is_generated(i) for i in bpy.data.images)
+def has_relight_data(scene) -> bool:
+    key = scene_key(scene)
+    return any(_ours(m, key) for m in bpy.data.materials)
+
+
+def relit_slot_count(scene) -> int:
+    return sum(1 for _ in _relit_slots(scene))
 
 
 def _editable(idb) -> bool:
@@ -331,33 +384,44 @@ def _editable(idb) -> bool:
     return bool(getattr(idb, "is_editable", idb.library is None)) and idb.library is None
 
 
+def slot_access(obj):
+    """How ``obj``'s material slots can be reassigned: "direct" (local data), "override" (a
+    library-override object whose linked mesh holds the slots: an object-level slot is used),
+    or None (linked, read-only)."""
+    if not _editable(obj):
+        return None
+    if all(_editable(obj.data if slot.link == "DATA" else obj) for slot in obj.material_slots):
+        return "direct"
+    return "override" if obj.override_library is not None else None
+
+
 def slots_editable(obj) -> bool:
-    """Whether every material slot of ``obj`` can be reassigned (slots linked to the object
-    live in the object, the others in its mesh; library data is read-only)."""
-    return _editable(obj) and all(_editable(obj.data if slot.link == "DATA" else obj)
-                                  for slot in obj.material_slots)
+    return slot_access(obj) is not None
 
 
 # -- entry point -------------------------------------------------------------------------------
 
 def write_results(context, scene_data, report, solution) -> dict:
-    """Write the display maps and relit materials; replaces a previous result (clear first).
+    """Write the display maps and relit materials for ``context.scene``, replacing its previous
+    result.  ``report`` is the ReadReport of the same read (groups, lamps, UV maps, sources).
 
     ``solution``: a ShadowFreeResult (T_final and M_k per image; T_final is written as
     ``"<image>.relight.T"`` unless the correction was off).
-    Returns a summary dict (images, materials, objects, lamps, skipped, warnings)."""
+    Returns a summary dict (images, materials, objects, lamps, slots, warnings)."""
+    scene = context.scene
     warnings = []
-    clear_relight_data(context)
+    key = scene_key(scene, create=True)
+    clear_relight_data(scene)
 
-    # Lamps: light data and power at precompute time.
+    # Lamps: light data and the power each map is computed at (P0 of the driver p / P0).
     lamps = []
-    for name in scene_data.lamp_names:
-        obj = bpy.data.objects.get(name)
+    for j, name in enumerate(scene_data.lamp_names):
+        src = report.lamp_sources[j] if j < len(report.lamp_sources) else {}
+        obj = bpy.data.objects.get(src.get("object", name))
         if obj is not None and obj.type == "LIGHT":
-            p0 = float(obj.data.energy)
-            obj.data[POWER0] = p0
-            if p0 <= 0:
-                warnings.append(f"Lamp '{name}' has no power at precompute time: its map is 0")
+            p0 = float(src.get("power_ref", obj.data.energy))
+            if _editable(obj.data):
+                obj.data[POWER0] = p0
             lamps.append((name, obj.data, p0))
         else:
             warnings.append(f"Lamp '{name}' is not a light object: its intensity is fixed at 1")
@@ -366,19 +430,20 @@ def write_results(context, scene_data, report, solution) -> dict:
     # Materials with image faces (material name -> image index) and the objects using them.
     group = np.asarray(scene_data.group)
     image = np.asarray(scene_data.image) if scene_data.image is not None else np.full(len(group), -1)
-    mat_image, mat_objects, no_image = {}, {}, set()
+    mat_image, mat_objects, mat_uv, no_image = {}, {}, {}, set()
     for g in np.unique(group):
-        obj_name, mat_name = report.groups[int(g)]
+        label, mat_name = report.groups[int(g)]
         imgs = np.unique(image[group == g])
         with_img = imgs[imgs >= 0]
         if len(with_img) and mat_name:
             mat_image.setdefault(mat_name, int(with_img[0]))
-            mat_objects.setdefault(mat_name, set()).add(obj_name)
+            mat_objects.setdefault(mat_name, set()).add(report.sources.get(label, label))
+            mat_uv.setdefault(mat_name, set()).add(report.uv_maps.get((label, mat_name), ""))
         if np.any(imgs < 0) and scene_data.lamp is not None and \
                 np.any((image < 0) & (group == g) & (np.asarray(scene_data.lamp) < 0)):
-            no_image.add((obj_name, mat_name))
-    for obj_name, mat_name in sorted(no_image):
-        warnings.append(f"'{obj_name}' / material '{mat_name or '(none)'}': faces without an "
+            no_image.add((label, mat_name))
+    for label, mat_name in sorted(no_image):
+        warnings.append(f"'{label}' / material '{mat_name or '(none)'}': faces without an "
                         "image texture are left unchanged")
 
     # Library (read-only) objects keep their materials: no relit copy, no maps for them.
@@ -403,7 +468,7 @@ def write_results(context, scene_data, report, solution) -> dict:
 
     # Images, one per (used image, lamp).
     made_images, t_images = {}, {}
-    writer = _HalfWriter()
+    writer = _HalfWriter(key)
     try:
         for i, m in solution.maps.items():
             if i not in used_images:
@@ -422,30 +487,36 @@ def write_results(context, scene_data, report, solution) -> dict:
         orig = bpy.data.materials.get(mat_name)
         if orig is None or i not in made_images:
             continue
+        uv_maps = {u for u in mat_uv.get(mat_name, ()) if u}
+        if len(uv_maps) > 1:
+            warnings.append(f"Material '{mat_name}' is read through different UV maps on "
+                            f"different objects ({', '.join(sorted(uv_maps))}): its relit copy "
+                            "keeps the material's own UV Map node")
         relit[mat_name] = _relit_material(orig, scene_data.images[i].name, made_images[i], lamps,
-                                          t_images.get(i))
+                                          key, t_images.get(i),
+                                          next(iter(uv_maps)) if len(uv_maps) == 1 else None)
 
-    # Assign: record every object's originals first (meshes may be shared), then swap.
-    objects = set()
+    # Assign.
+    objects, assigned = set(), 0
     for mat_name, names in mat_objects.items():
         if mat_name not in relit:
             continue
         for obj_name in names:
             obj = bpy.data.objects.get(obj_name)
-            if obj is None:
-                warnings.append(f"'{obj_name}' is an instance: its material is not replaced")
-                continue
-            objects.add(obj)
-    objects = sorted(objects, key=lambda o: o.name)
-    for obj in objects:
-        obj[ORIGINALS] = [s.material.name if s.material is not None and s.material.name in relit
-                          else "" for s in obj.material_slots]
-    assigned = 0
-    for obj in objects:
+            if obj is not None:
+                objects.add(obj)
+    for obj in sorted(objects, key=lambda o: o.name):
+        access = slot_access(obj)
         for slot in obj.material_slots:
-            if slot.material is not None and slot.material.name in relit:
-                slot.material = relit[slot.material.name]
-                assigned += 1
+            orig = original_material(slot.material)
+            if orig is None or orig.name not in relit:
+                continue
+            new = relit[orig.name]
+            if access == "override" and slot.link == "DATA" and not _editable(obj.data):
+                slot.link = "OBJECT"
+                new[OBJECT_LINKS] = list(new.get(OBJECT_LINKS, ())) + [obj.name]
+            slot.material = new
+            assigned += 1
     report.warnings.extend(w for w in warnings if w not in report.warnings)
     return {"images": sum(len(v) for v in made_images.values()) + len(t_images),
             "materials": len(relit),

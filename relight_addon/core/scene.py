@@ -80,6 +80,10 @@ class SceneData:
     group     (p,)      int32    caller's grouping (object/material), carried through untouched
     uv        (p, 4, 2) optional texture coordinates of the corners
     image     (p,)      optional index into ``images`` (-1: none)
+    lamp_intensity (k,) each lamp's intensity in the scene as given (the photo), relative to its
+                        emission here: a lamp that is off in the photo keeps a reference emission
+                        (light transport is linear, so its basis can still be solved) with
+                        intensity 0.  Default: every lamp at 1.
     """
 
     corners: np.ndarray
@@ -93,8 +97,10 @@ class SceneData:
     image: np.ndarray | None = None
     images: list = field(default_factory=list)
     viewpoint: np.ndarray | None = None
+    lamp_intensity: np.ndarray | None = None
     dropped_degenerate: int = 0
     dropped_duplicate: int = 0
+    duplicate_groups: list = field(default_factory=list)   # (dropped group, kept group) pairs
 
     def __post_init__(self):
         p = len(self.corners)
@@ -118,6 +124,13 @@ class SceneData:
         emitting = self.emission.max(axis=1) > 0
         if np.any(emitting & (self.lamp < 0)):
             raise SceneError("Every emitting patch needs a lamp index")
+        k = len(self.lamp_names)
+        self.lamp_intensity = (np.ones(k) if self.lamp_intensity is None
+                               else np.asarray(self.lamp_intensity, np.float64).reshape(-1))
+        if len(self.lamp_intensity) != k:
+            raise SceneError(f"lamp_intensity has {len(self.lamp_intensity)} values for {k} lamps")
+        if not np.all(np.isfinite(self.lamp_intensity)) or np.any(self.lamp_intensity < 0):
+            raise SceneError("Lamp intensities must be finite and non-negative")
         self._split_non_planar()
         self._drop_degenerate()
         self._drop_duplicates()
@@ -174,9 +187,12 @@ class SceneData:
         size = float(np.ptp(self.corners.reshape(-1, 3), axis=0).max()) or 1.0
         key = np.round(np.sort(self.corners.reshape(-1, 4, 3), axis=1) / (1e-9 * size)).reshape(-1, 12)
         key = np.concatenate([key, np.round(normal * 1e6)], axis=1)
-        _, first = np.unique(key, axis=0, return_index=True)
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
         if len(first) < self.n_patches:
             self.dropped_duplicate += self.n_patches - len(first)
+            dup = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(self.n_patches))
+            pairs = np.stack([self.group[dup], self.group[first[inverse.reshape(-1)][dup]]], 1)
+            self.duplicate_groups = [tuple(int(x) for x in p) for p in np.unique(pairs, axis=0)]
             self._take(np.sort(first))
 
     def with_rho(self, rho) -> "SceneData":
@@ -210,7 +226,10 @@ class SceneData:
         """Raise SceneError for scenes the solver cannot light."""
         if self.n_patches == 0:
             raise SceneError("The scene has no usable faces")
-        if not np.any(self.emission > 0):
+        lit = np.zeros(self.n_lamps, bool)
+        on = self.lamp >= 0
+        lit[self.lamp[on]] = self.emission[on].max(axis=1) > 0
+        if not np.any(lit & (self.lamp_intensity > 0)):
             if np.any(self.lamp >= 0):
                 raise SceneError("Every lamp has zero power: set the real lamps to their power "
                                  "in the photo before Precompute (then animate them)")

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..radiosity.links import VISIBLE
 from ..relight.refine import SIGNIFICANT_SHARE, visibility_class
-from ..relight.transport import Transport
+from ..relight.transport import Transport, as_given
 from ..texture.colour import luminance
 
 MODES = ("RATIO", "VISIBILITY", "FRONTIER")
@@ -36,14 +36,14 @@ def element_values(result, mode: str):
     Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
     lamp_leaf = sol.scene.lamp[h.patch[leaves]] >= 0
     if mode == "RATIO":
-        hu, ho = luminance(HU_k.sum(0)), luminance(Hocc_k.sum(0))
+        hu, ho = luminance(as_given(HU_k, sol.scene)), luminance(as_given(Hocc_k, sol.scene))
         ratio = np.where(hu > 0, ho / np.where(hu > 0, hu, 1.0), 1.0)
         keep = ~lamp_leaf
         return h.corners[leaves[keep]], np.clip(ratio[keep], 0.0, 1.0)
     if mode == "VISIBILITY":
         du, do = luminance(DU_k), luminance(Docc_k)                        # (k, L)
         att = np.where(du > 0, do / np.where(du > 0, du, 1.0), 1.0)
-        share = du / np.maximum(luminance(HU_k.sum(0))[None], 1e-300)
+        share = du / np.maximum(luminance(as_given(HU_k, sol.scene))[None], 1e-300)
         sig = share >= SIGNIFICANT_SHARE
         code = visibility_class(att)
         worst = np.where(sig, code, VISIBLE).max(axis=0, initial=VISIBLE)

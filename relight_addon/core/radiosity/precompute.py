@@ -52,9 +52,10 @@ class RadiositySolution:
         return self.hierarchy.n
 
     def radiosity(self, intensities=None) -> np.ndarray:
-        """Leaf radiosity (L, 3) for lamp intensity factors I_k (default: all 1)."""
+        """Leaf radiosity (L, 3) for lamp intensity factors I_k (default: the scene's own,
+        ``scene.lamp_intensity``: 1 for every lamp unless one is off as given)."""
         k = len(self.basis)
-        I = np.ones(k) if intensities is None else np.asarray(intensities, float)
+        I = self.scene.lamp_intensity if intensities is None else np.asarray(intensities, float)
         # One BLAS matrix-vector product, with I in the basis' dtype (benchmarks/bench_relight.py).
         return (I.astype(self.basis.dtype) @ self.basis.reshape(k, -1)).reshape(self.basis.shape[1:])
 

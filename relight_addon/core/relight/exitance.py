@@ -55,7 +55,10 @@ def fit_lamp_exitance(unit_basis, observed, area, channels_weight=LUMINANCE) -> 
 def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light):
     """Exitance factors (photo units per scene unit) by eq 4.2, by NNLS and by the shadow-edge
     fit (``opt.exitance``); then per-leaf albedo rounds (the basis is solved with them).
-    Returns (scale used, eq 4.2, NNLS)."""
+    Returns (scale used, eq 4.2, NNLS).
+
+    Only lamps that are on in the photo (``scene.lamp_intensity`` > 0) are fitted; a lamp that
+    is off in it takes the geometric mean of their factors (the user's power units)."""
     scene = sol.scene
     k = scene.n_lamps
     lamp_patch = scene.lamp >= 0
@@ -71,40 +74,43 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light):
             e_j = float((area[sel] * lum_emission[sel]).sum() / max(area[sel].sum(), 1e-300))
             eq_k[j] = e_eq / max(e_j, 1e-300)
     nnls_k = nnls_factors(sol, tm, photo, use_patch)
+    on = scene.lamp_intensity > 0
 
     def rounds(scale):
+        scale[~on] = np.exp(np.mean(np.log(np.maximum(scale[on], 1e-300))))
         albedo_rounds(sol, tm, photo, use_patch, opt.rho_mean, opt.albedo_rounds, scale)
 
     if opt.exitance == "nnls" and np.any(nnls_k > 0):
         scale = nnls_k.copy()
-    elif opt.exitance == "equal" or k == 1:
+    elif opt.exitance == "equal" or on.sum() == 1:
         scale = eq_k.copy()
     else:   # "edges"
         scale = (nnls_k if np.any(nnls_k > 0) else eq_k).copy()
         rounds(scale)
         for _ in range(2):
-            scale = edge_fit(sol, tm, photo, scale, texel_light)
+            scale[on] = edge_fit(sol, tm, photo, scale, texel_light, on)
             rounds(scale)
         return scale, eq_k, nnls_k
     rounds(scale)
     return scale, eq_k, nnls_k
 
 
-def edge_fit(sol, tm, photo, scale, texel_light):
+def edge_fit(sol, tm, photo, scale, texel_light, on):
     """Relative lamp exitances that make the reflectance photo / irradiance smoothest.
 
     Reflectance does not know where shadows fall: with the right exitance ratios the photo's
     shadow edges are explained by the irradiance and vanish from photo / H.  Minimises the
     total variation of log(photo / sum_k t_k H_k) over neighbouring texels (robust to genuine
     texture edges, which add a constant) over the k - 1 free ratios; irradiance per texel with
-    ray-cast direct light (``texel_light``, a TexelLight), the overall scale is kept.
+    ray-cast direct light (``texel_light``, a TexelLight), the overall scale is kept.  Only the
+    lamps ``on`` in the photo take part; returns their factors.
     """
     from scipy.optimize import minimize
-    k = len(scale)
+    k = int(np.sum(on))
     if k < 2 or tm.n_texels == 0:
-        return scale
+        return scale[on]
     Hocc_k, _ = texel_light.irradiance(sol, scale)
-    H = luminance(Hocc_k)                                             # (k, T)
+    H = luminance(Hocc_k[on])                                         # (k, T)
     pairs = adjacent_texel_pairs(tm)
     t_lum = luminance(photo)
     ok = (t_lum[pairs[:, 0]] > 0) & (t_lum[pairs[:, 1]] > 0)
@@ -125,18 +131,20 @@ def edge_fit(sol, tm, photo, scale, texel_light):
                    options={"xatol": 1e-3, "fatol": 1e-6 * objective(x0), "maxiter": 400 * k})
     t = np.exp(np.r_[0.0, res.x])
     t *= k / t.sum()                      # keep the overall scale (fixed later by rho^)
-    return scale * t
+    return scale[on] * t
 
 
 def nnls_factors(sol, tm, photo, use_patch, current=None):
     """Exitance factors of the scene's lamps that best explain the photo (per-lamp basis)."""
     obs, counts = leaf_means(sol, tm, photo)
     use = use_patch[sol.system.patch] & (counts > 0)
+    on = sol.scene.lamp_intensity > 0                # lamps off in the photo cannot be fitted
     basis = sol.basis[:, use]
     if current is not None:                          # basis already scaled by ``current``
         basis = basis / np.where(current > 0, current, 1.0)[:, None, None]
-    f = fit_lamp_exitance(basis, obs[use], sol.system.leaf_area[use])
-    return np.asarray(f.exitance, float)
+    out = np.zeros(len(on))
+    out[on] = fit_lamp_exitance(basis[on], obs[use], sol.system.leaf_area[use]).exitance
+    return out
 
 
 def photo_misfit(sol, tm, photo, use_patch):

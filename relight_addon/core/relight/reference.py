@@ -48,7 +48,7 @@ def reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, opt
     du, do = luminance(DU_k), luminance(Docc_k)                           # (k, L)
     att = np.where(du > 0, do / np.where(du > 0, du, 1.0), 1.0).T
     share = (du / np.maximum(luminance(HU)[None], 1e-300)).T
-    sig = share >= SIGNIFICANT_SHARE
+    sig = (share >= SIGNIFICANT_SHARE) & (sol.scene.lamp_intensity > 0)[None, :]  # lit in the photo
     shadowed = np.any(sig & (att < 1 - VIS_TOL), axis=1) & ~lamp_leaf
     lit = ~np.any(sig & (att < 1 - VIS_TOL), axis=1) & ~lamp_leaf & np.any(sig, axis=1)
     means, counts = element_means(t_inter, elem, h.n, hierarchy=h)

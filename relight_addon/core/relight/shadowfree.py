@@ -42,7 +42,7 @@ from .maps import (clipped_ratio, map_images, maps_from, ratio_maps, texels_of,
 from .reference import reference_correction
 from .refine import refine_by_texture
 from .texel import TexelLight
-from .transport import Transport
+from .transport import Transport, as_given
 
 
 @dataclass
@@ -181,19 +181,20 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     # 4. DRB97: the photo as it is, maps B_k / sum B.
     if opt.mode == "none":
         stage(0.9, "Display maps")
-        mp, cov = map_images(tm, ratio_maps(sol, tm))
+        mp, cov = map_images(tm, ratio_maps(sol, tm, weights=scene.lamp_intensity))
         return result(texture_images(tm, photo, scene.images), mp, cov, sol)
 
     # 2. Per texel: direct light ray-cast at every texel, indirect from the solution.
     if opt.mode == "texel":
         stage(0.6, "Per-texel irradiance")
         Hocc_k, HU_k = texel_light.irradiance(sol, scale_k)
-        Hocc = Hocc_k.sum(axis=0)
+        Hocc = as_given(Hocc_k, scene)
         # Removing occlusion never darkens (E-bar >= 0; sampling noise could say otherwise).
-        factor = clipped_ratio(HU_k.sum(axis=0), Hocc, fmin=1.0)
+        factor = clipped_ratio(as_given(HU_k, scene), Hocc, fmin=1.0)
         t_final = photo * factor
-        # D = H_occ x the clipped factor (= H_unocc unless clipped), so that T_final x sum M_k
-        # gives the photo back exactly even where the factor hit its ceiling.
+        # D = H_occ x the clipped factor (= H_unocc unless clipped), so that T_final x sum_k
+        # I_k M_k gives the photo back exactly at its own intensities, even where the factor
+        # hit its ceiling.
         maps = maps_from(Hocc_k, Hocc * factor)
         stage(0.95, "Writing maps")
         mp, cov = map_images(tm, maps)
@@ -214,7 +215,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     def per_texel(leaf_vals):          # smooth per-texel values of the current solution
         return vertex_interpolate(sol.hierarchy, leaf_vals, tm, elem)
 
-    t_inter = photo * clipped_ratio(per_texel(HU_k.sum(0)), per_texel(Hocc_k.sum(0)), fmin=1.0)
+    HU = as_given(HU_k, scene)
+    t_inter = photo * clipped_ratio(per_texel(HU), per_texel(as_given(Hocc_k, scene)), fmin=1.0)
 
     # Second modification: frontier, references, rho_corr, T_final (eq 4.8, 4.9).
     stage(0.7, "Frontier and reference elements (eq 4.8, 4.9)")
@@ -222,7 +224,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     t_final = t_inter
     reference_info = None
     if opt.reference:
-        corr, counts, codes = reference_correction(sol, tm, elem, t_inter, HU_k.sum(0), Docc_k,
+        corr, counts, codes = reference_correction(sol, tm, elem, t_inter, HU, Docc_k,
                                                    DU_k, occluder, opt)
         reference_info = {"hierarchy": sol.hierarchy, "leaves": sol.leaves.copy(), "codes": codes}
         t_final = t_inter * per_texel(corr)
@@ -244,7 +246,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stage(0.92, "Display maps")
     Hocc_k, HU_k, _, _ = Transport(sol).irradiance(sol.basis)
     elem = texel_elements(sol.hierarchy, tm)
-    maps = maps_from(np.stack([per_texel(x) for x in Hocc_k]), per_texel(HU_k.sum(0)))
+    maps = maps_from(np.stack([per_texel(x) for x in Hocc_k]), per_texel(as_given(HU_k, scene)))
     mp, cov = map_images(tm, maps)
     n_shadowed, n_frontier, n_ref, n_default = counts
     return result(texture_images(tm, t_final, scene.images), mp, cov, sol, first,

@@ -38,6 +38,12 @@ class Transport:
                 self._per_lamp(self.dir_occ, basis), self._per_lamp(self.dir_unocc, basis))
 
 
+def as_given(per_lamp, scene):
+    """The sum over lamps of per-lamp values (k, ...) at the scene's own lamp intensities (the
+    lighting of the photo: a lamp that is off in it counts 0)."""
+    return np.tensordot(np.asarray(scene.lamp_intensity, float), per_lamp, axes=1)
+
+
 def leaf_means(sol, tm, values):
     """Mean of per-texel ``values`` (T, 3) over each leaf of the solution, and the texel counts
     (leaves without texels take their ancestors' means)."""
