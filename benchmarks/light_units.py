@@ -65,8 +65,7 @@ def _bpy():
 
 
 def _diffuse_material(bpy, name, albedo=ALBEDO):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    mat = bpy.data.materials.new(name)      # 5.0: a new material already has a node tree
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -137,7 +136,6 @@ def _add_emitter(bpy, spec, i):
     obj = bpy.data.objects.new(f"E{i}", me)
     bpy.context.scene.collection.objects.link(obj)
     mat = bpy.data.materials.new(f"E{i}Mat")
-    mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
