@@ -716,7 +716,7 @@ def detail_table(rows, extra=None):
 
 def summary_table(rows):
     lines = ["| configuration | probes | sum(meas) / sum(pred) | min ratio | max ratio | "
-             "median noise (rel.) | max abs dev / E_max | max meas where pred = 0, / E_max |",
+             "median noise (rel.) | max abs dev / E_max | max meas where pred = 0 (/ E_max) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         unlit = "-" if r["unlit_max"] is None else f"{r['unlit_max']:.1e}"
