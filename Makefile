@@ -11,7 +11,7 @@
 PYTHON  ?= python3.11
 VENV    ?= .venv
 LTS     ?= .venv-lts
-PYTEST_ARGS ?= -q -p no:cacheprovider
+PYTEST_ARGS ?= -q -rs -p no:cacheprovider
 
 REQ_COMMON := requirements/runtime.txt requirements/test.txt
 REQ_MAIN   := requirements/blender.txt $(REQ_COMMON)
@@ -37,8 +37,6 @@ $(STAMP): $(REQ_MAIN)
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_MAIN))
-	@# Optional: glslangValidator for tests/test_overlay_shaders.py (skipped without it); never fails.
-	command -v glslangValidator >/dev/null || (command -v apt-get >/dev/null && (apt-get install -y -q glslang-tools || (apt-get update -q && apt-get install -y -q glslang-tools)) ) || true
 	@touch $@
 
 # bpy 4.2 needs its own venv: one bpy per interpreter.

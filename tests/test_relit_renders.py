@@ -47,8 +47,6 @@ FRAMES = (1, 2, 3)
 VIEWED = "Ceiling"
 REL_TOL = 0.01          # the issue's 1 %
 ABS_FLOOR = 1e-3        # relative error is taken against max(expected, ABS_FLOOR)
-TIMINGS = {}            # printed at the end (pytest -s) and used in the report
-ERRORS = {}
 
 
 def lamp_a_energy(frame):
@@ -197,9 +195,7 @@ def relit(tmp_path_factory):
     for n in mat.node_tree.nodes:
         if n.bl_idname == "ShaderNodeTexImage":
             n.interpolation = "Closest"
-    t0 = time.perf_counter()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    TIMINGS["precompute draft"] = time.perf_counter() - t0
     _keyframe_lamps()
     _setup_camera_on(VIEWED)
     scene = bpy.context.scene
@@ -279,26 +275,21 @@ print("RELIGHT_WORKER_JSON " + json.dumps(info))
 def worker(relit):
     """The saved .blend rendered by a fresh process: no add-on, Python auto-run off."""
     eevee, cycles = engines_available()
-    ok = [e for e in (cycles, eevee) if e and e not in SKIPPED]
+    ok = [e for e in (cycles, eevee) if e]
     outdir = str(relit["tmp"] / "worker")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env["RELIT_MAT"] = relit["relit_mat"]
-    t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", WORKER, relit["blend"], outdir, ",".join(ok)],
                           cwd=str(relit["tmp"]), env=env, capture_output=True, text=True,
                           timeout=300)
-    TIMINGS["worker process"] = time.perf_counter() - t0
     line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RELIGHT_WORKER_JSON ")),
                 None)
     assert proc.returncode == 0 and line, (proc.returncode, proc.stdout[-2000:], proc.stderr[-2000:])
     info = json.loads(line.split(" ", 1)[1])
     info["outdir"] = outdir
-    for e, s in info["render_s"].items():
-        TIMINGS[f"worker render {e}"] = s
     return info
 
 
-SKIPPED = {}            # engine -> reason (set when it cannot render in this environment)
 RENDERS = {}            # engine -> {frame: pixels} from this (the add-on's) process
 
 
@@ -312,16 +303,10 @@ def rendered(request, relit):
     engine = _engine_param(request.param)
     if engine is None:
         pytest.skip(f"{request.param}: no such render engine in this build")
-    if engine in SKIPPED:
-        pytest.skip(SKIPPED[engine])
     if engine not in RENDERS:
+        # A failed render is a failure, not a skip (EEVEE renders headless through EGL here).
         outdir = str(relit["tmp"] / "local" / engine)
-        try:
-            frames, dt = render_animation(bpy.context.scene, engine, outdir)
-        except Exception as ex:              # e.g. no GPU / EGL context for EEVEE
-            SKIPPED[engine] = f"{engine} cannot render headless here: {type(ex).__name__}: {ex}"
-            pytest.skip(SKIPPED[engine])
-        TIMINGS[f"local render {engine} (3 frames)"] = dt
+        frames, dt = render_animation(bpy.context.scene, engine, outdir)
         RENDERS[engine] = frames
     return engine, RENDERS[engine]
 
@@ -341,7 +326,6 @@ def test_animation_matches_relit_formula(relit, rendered):
     engine, frames = rendered
     for f in FRAMES:
         err = max_rel_err(frames[f], relit["expected"][f])
-        ERRORS[(engine, f)] = err
         assert err < REL_TOL, (engine, f, err)
 
 
@@ -353,9 +337,7 @@ def test_worker_render_matches(relit, rendered, worker):
     for f in FRAMES:
         got = _read_exr(os.path.join(worker["outdir"], engine, f"frame_{f:04d}.exr"))
         err = max_rel_err(got, frames[f])
-        ERRORS[(engine + " worker vs local", f)] = err
         assert err < tol, (engine, f, err)
-        ERRORS[(engine + " worker vs formula", f)] = max_rel_err(got, relit["expected"][f])
 
 
 def test_reopened_file_keeps_relit_data_without_addon(relit, worker):
@@ -386,11 +368,3 @@ def test_reopened_file_keeps_relit_data_without_addon(relit, worker):
         got = worker["intensities"][str(f)]
         for k in LAMPS:
             assert abs(got[k] - intensities(f)[k]) < 1e-6, (f, k, got)
-
-
-def test_zz_report():
-    """Not a check: prints timings and errors (pytest -s)."""
-    print("\nrelit renders timings (s):", {k: round(v, 2) for k, v in TIMINGS.items()})
-    print("relit renders max relative errors:",
-          {f"{k[0]} f{k[1]}": f"{v:.2e}" for k, v in ERRORS.items()})
-    print("skipped engines:", SKIPPED)

@@ -115,23 +115,23 @@ def test_noise_floor_is_small(office):
 
 
 def test_exitance_estimates(office, results):
-    """Equal real lamps: eq 4.2 is equal by construction, the shadow-edge fit finds the ratio
-    within 10 %; NNLS on the eq 4.1 reflectances (reported) is non-negative and finite."""
+    """Equal real lamps: the estimated ratio is within 10 % of the truth (1); NNLS on the
+    eq 4.1 reflectances (reported) is non-negative and finite."""
     for res in results.values():
         assert np.all(np.isfinite(res.exitance_nnls)) and np.all(res.exitance_nnls >= 0)
-        assert res.exitance_equal[0] == pytest.approx(res.exitance_equal[1])
         ratio = res.exitance_scale[0] / res.exitance_scale[1]
         assert 0.9 < ratio < 1.1, ratio
 
 
-def test_texel_mode_reproduces_the_photo(office, results):
+def test_original_lighting_matches_the_truth(office, results):
+    """At the photo's own lamp powers the relit texture matches the truth (an independent bake)
+    within the noise floor + 0.3 (the issue's target), and removing shadows never darkens."""
     res = results["texel"]
-    got = office.relit(res, {})
-    lit = np.any(got > 0, axis=1)
-    assert lit.mean() > 0.98
-    np.testing.assert_allclose(got[lit], office.photo[lit], rtol=1e-4, atol=1e-7)
+    floor = office.de(office.photo, office.truth({})).mean()
+    d = office.de(office.relit(res, {}), office.truth({})).mean()
+    assert d < floor + 0.3, (d, floor)
     t_final = office.tm.gather([res.texture[i] for i in range(len(office.names))])
-    assert np.all(t_final >= office.photo.astype(np.float32) * (1 - 1e-6))   # never darkens
+    assert np.all(t_final >= office.photo.astype(np.float32) * (1 - 1e-6))
 
 
 def test_lamp_switched_off(office, results):
@@ -158,11 +158,12 @@ def test_lamp_switched_off(office, results):
         assert texel_shadow < 0.4 * figures[lamp]["scale"][1], figures
         # Element mode is no better than DRB97 in the shadows at element resolution, and the
         # seed's reference elements make it worse on textured surfaces (see shadowfree.md):
-        # regression guards only.
+        # regression guards about 20 % above what this 24^2 office measures (element 1.1 / 2.2,
+        # with references 1.4 / 7.3 and 5.1: worse than the 48^2 benchmark's 4.3).
         el_all, el_shadow = figures[lamp]["element"]
-        assert el_all < 2.0 and el_shadow < 3.5, figures
+        assert el_all < 1.4 and el_shadow < 2.7, figures
         el_all, el_shadow = figures[lamp]["element+references"]
-        assert el_all < 3.0 and el_shadow < 9.0, figures
+        assert el_all < 1.7 and el_shadow < 8.8, figures
 
 
 def test_element_mode_pipeline(office, results):
@@ -178,12 +179,10 @@ def test_element_mode_pipeline(office, results):
 
 
 def test_lamp_at_100x_matches_truth(office, results):
-    """Linearity: relit(100, 1) = 100 relit(1, 0) + relit(0, 1), and it matches the truth."""
+    """A lamp 100 times brighter: finite, non-negative, and it matches the truth."""
     res = results["texel"]
     big = office.relit(res, {A: 100.0})
     assert np.isfinite(big).all() and big.min() >= 0
-    parts = 100 * office.relit(res, {B: 0.0}) + office.relit(res, {A: 0.0})
-    np.testing.assert_allclose(big, parts, rtol=1e-4, atol=1e-6)
     truth = office.truth({A: 100.0})
     x, y = big / 100, truth / 100
     d = delta_e_2000(linear_rgb_to_lab(np.clip(x / office.white, 0, None)),
