@@ -1,10 +1,10 @@
 """The bpy -> SceneData reader (relight_addon/blender/read.py), with Blender as a Python module.
 
-The lamp conventions (area light power -> exitance, emission strength -> exitance) are checked
-against tiny Cycles renders: an orthographic camera looks straight down at a white diffuse
-2 x 2 m plane, so each pixel of the render is the plane's radiance E / pi at the pixel centre.
-Our prediction is sum over lamp patches of point_to_polygon x exitance, with the patches and
-exitances coming from read_scene; Cycles is the independent reference.
+The lamp conventions (every light type's power -> exitance, intensity or irradiance; emission
+strength -> exitance on both sides) are checked against tiny Cycles renders: an orthographic
+camera looks straight down at a white diffuse 2 x 2 m plane, so each pixel of the render is the
+plane's radiance E / pi over the pixel.  Our prediction is the core's lamp_irradiance (lamp
+patches and lights) of the scene read_scene returns; Cycles is the independent reference.
 """
 import math
 import os
@@ -18,7 +18,6 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from relight_addon.blender.read import read_scene  # noqa: E402
-from relight_addon.core.geometry.formfactor import point_to_polygon  # noqa: E402
 from relight_addon.core.scene import quad_area_normal  # noqa: E402
 
 N = 32  # render resolution
@@ -203,24 +202,26 @@ def test_area_light_polygons(shape, size, size_y, area):
     assert np.allclose(scene.corners.reshape(-1, 3).mean(axis=0), obj.location, atol=1e-6)
 
 
-def test_unsupported_lights_and_no_lamps():
-    link(bpy.data.objects.new("P", bpy.data.lights.new("P", "POINT")))
-    link(bpy.data.objects.new("S", bpy.data.lights.new("S", "SUN")))
+def test_lamps_of_every_type_and_lamps_off():
+    """Point and sun lights become core Lights, area lights patches (or Lights with a spread);
+    a lamp at 0 W is kept, off in the photo, at a reference power of 1 W."""
+    from relight_addon.core.lights import POINT, SUN
+    for name, kind in (("P", "POINT"), ("S", "SUN")):
+        light = bpy.data.lights.new(name, kind)
+        light.energy = 0.0
+        link(bpy.data.objects.new(name, light))
     mesh_object("floor", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [(0, 1, 2, 3)])
     dark = area_light("dark", "SQUARE", 1.0, power=0.0)
-    dark.data.spread = 0.5
     scene, report = read_scene(bpy.context)
-    assert any("'dark'" in w and "spread" in w for w in report.warnings)
-    # a lamp at power 0 is kept (off in the photo, computed at a reference power of 1 W) ...
+    assert report.lamps == 3 and sorted(scene.lamp_names) == ["P", "S", "dark"]
+    assert scene.lamp_intensity.tolist() == [0.0, 0.0, 0.0]
+    assert sorted(scene.lights.kind.tolist()) == [POINT, SUN]
+    assert all(src["power_ref"] == 1.0 for src in report.lamp_sources)
+    assert np.allclose(scene.emission[scene.lamp >= 0], 1.0)       # 1 W over 1 m^2
     assert any("'dark'" in w and "off" in w for w in report.warnings)
-    assert report.lamps == 1 and scene.lamp_intensity.tolist() == [0.0]
-    assert np.allclose(scene.emission[scene.lamp == 0], 1.0)       # 1 W over 1 m^2
-    assert report.lamp_sources[0]["power_ref"] == 1.0
-    # ... but with every lamp off there is nothing the photo can be explained by
+    # with every lamp off there is nothing the photo can be explained by
     assert report.errors and "Every lamp is off" in report.errors[0]
-    assert any("'P'" in w and "not supported" in w for w in report.warnings)
-    assert any("'S'" in w for w in report.warnings)
-    assert scene.n_patches == 2           # the floor and the off lamp
+    assert scene.n_patches == 2           # the floor and the off area lamp
 
 
 def _render_setup():
@@ -275,27 +276,59 @@ def _cycles_irradiance(sc):
 
 
 def _our_irradiance(scene):
-    c = (np.arange(N) + 0.5) * 2.0 / N - 1.0
+    """Unoccluded direct irradiance at the pixel centres of the floor from every lamp (patches
+    and lights), averaged over a 3 x 3 grid in each pixel as the render's box filter does."""
+    from relight_addon.core.relight.direct import lamp_irradiance
+    sub = (np.arange(3) + 0.5) / 3
+    c = (np.arange(N)[:, None] + sub[None]).ravel() * 2.0 / N - 1.0
     x, y = np.meshgrid(c, c)  # row = +y (Blender images start at the bottom), column = +x
-    pts = np.stack([x.ravel(), y.ravel(), np.zeros(N * N)], 1)
+    pts = np.stack([x, y, np.zeros_like(x)], -1).reshape(N, 3, N, 3, 3)
+    pts = pts.transpose(0, 2, 1, 3, 4).reshape(N * N, 9, 3)
     up = np.tile([0.0, 0.0, 1.0], (N * N, 1))
-    total = np.zeros((N * N, 3))
-    _, normals = quad_area_normal(scene.corners)
-    for i in np.flatnonzero(scene.lamp >= 0):
-        f = point_to_polygon(pts, up, np.tile(scene.corners[i], (N * N, 1, 1)), np.tile(normals[i], (N * N, 1)))
-        total += f[:, None] * scene.emission[i]
-    return total.reshape(N, N, 3)
+    U, _ = lamp_irradiance(scene, pts, up, rays=256)
+    return U.sum(axis=1).reshape(N, N, 3)
 
 
-@pytest.mark.parametrize("kind", ["RECTANGLE", "ELLIPSE", "EMISSIVE", "UNNORMALIZED", "MIRRORED"])
+def _point_like(kind):
+    light = bpy.data.lights.new(kind, "SPOT" if kind.startswith("SPOT") else "POINT")
+    light.energy = 60.0
+    light.color = (1.0, 0.7, 0.4)
+    if kind == "POINT_RADIUS":
+        light.shadow_soft_size = 0.3
+    if kind.startswith("SPOT"):
+        light.spot_size = math.radians(70)
+        light.spot_blend = 0.4
+        light.shadow_soft_size = 0.1 if kind == "SPOT_RADIUS" else 0.0
+    obj = link(bpy.data.objects.new(kind, light))
+    obj.location = (0.2, -0.15, 0.7)
+    obj.rotation_euler = (0.3, -0.2, 0.4)
+    obj.scale = (1.0, 1.4, 1.0)              # an elliptic cone for the spot
+    return obj
+
+
+@pytest.mark.parametrize("kind", ["RECTANGLE", "ELLIPSE", "EMISSIVE", "EMISSIVE_BACK",
+                                  "UNNORMALIZED", "MIRRORED", "SPREAD", "POINT", "POINT_RADIUS",
+                                  "SPOT", "SPOT_RADIUS", "SUN"])
 def test_exitance_matches_cycles(kind):
+    """Every light type as read (and computed by lamp_irradiance) against a Cycles render of a
+    white floor under it: the totals within 3 %, pixel by pixel within 5 % where well lit."""
     sc = _render_setup()
-    if kind == "EMISSIVE":
-        quad = np.array([(-0.3, -0.2, 0.9), (0.35, -0.2, 0.9), (0.35, 0.3, 0.9), (-0.3, 0.3, 0.9)])[::-1]
+    if kind.startswith("EMISSIVE"):
+        quad = np.array([(-0.3, -0.2, 0.9), (0.35, -0.2, 0.9), (0.35, 0.3, 0.9), (-0.3, 0.3, 0.9)])
+        if kind == "EMISSIVE":
+            quad = quad[::-1]            # faces the floor; EMISSIVE_BACK lights it with its back
         em = mesh_object("emitter", quad, [(0, 1, 2, 3)])
         em.visible_camera = False
         mat, _, _ = material("glow", base=(0, 0, 0), emission=(1.0, 0.6, 0.3), strength=4.0)
         em.data.materials.append(mat)
+    elif kind.startswith(("POINT", "SPOT")):
+        _point_like(kind)
+    elif kind == "SUN":
+        light = bpy.data.lights.new("Sun", "SUN")
+        light.energy = 3.0
+        light.angle = math.radians(10)
+        obj = link(bpy.data.objects.new("Sun", light))
+        obj.rotation_euler = (0.5, 0.3, 0.0)
     else:
         shape = "ELLIPSE" if kind == "ELLIPSE" else "RECTANGLE"
         obj = area_light("L", shape, 0.7, 0.4, power=80.0, location=(0.15, -0.1, 0.8),
@@ -310,11 +343,14 @@ def test_exitance_matches_cycles(kind):
         if kind == "MIRRORED":  # negative scale: Cycles emits along the transformed -Z axis
             obj.rotation_euler = (math.pi + 0.25, -0.2, 0.5)
             obj.scale = (1.2, 1.0, -1.0)
+        if kind == "SPREAD":
+            obj.data.spread = math.radians(70)
     scene, report = read_scene(bpy.context)
     assert report.lamps == 1 and report.errors == []
-    if kind == "EMISSIVE":
+    if kind.startswith("EMISSIVE"):
         assert report.emissive_faces == 1 and scene.lamp_names == ["emitter/glow"]
         assert not any("glow" in w for w in report.warnings)
+        assert (scene.lamp == 0).sum() == 2                  # both sides emit
         assert np.allclose(scene.emission[scene.lamp == 0], np.pi * 4.0 * np.array([1.0, 0.6, 0.3]))
     ours = _our_irradiance(scene)
     cycles = _cycles_irradiance(sc)

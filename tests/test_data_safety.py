@@ -195,7 +195,7 @@ def test_lamp_keyframed_from_zero_uses_its_highest_key_as_reference():
 def test_reader_warnings_reach_the_status_and_the_panel():
     _addon()
     build_scene()
-    # an image-textured object without a UV map, a missing image, an unsupported light
+    # an image-textured object without a UV map, a missing image, a lamp that is off
     me = bpy.data.meshes.new("NoUV")
     me.from_pydata([(0, 0, 1), (0.3, 0, 1), (0.3, 0.3, 1), (0, 0.3, 1)], [], [(0, 1, 2, 3)])
     me.materials.append(_material("NoUV_mat", 20))
@@ -205,14 +205,15 @@ def test_reader_warnings_reach_the_status_and_the_panel():
     missing.source = "FILE"
     missing.filepath = os.path.join(ROOT, "no_such_photo.png")
     bpy.data.materials["WallYp_mat"].node_tree.nodes["Image Texture"].image = missing
-    bpy.context.scene.collection.objects.link(
-        bpy.data.objects.new("Bulb", bpy.data.lights.new("Bulb", "POINT")))
+    bulb = bpy.data.lights.new("Bulb", "POINT")
+    bulb.energy = 0.0
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Bulb", bulb))
     bpy.context.view_layer.update()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     warnings = list(bpy.context.scene["relight_status"]["warnings"])
     assert any("No UV map on object 'NoUV'" in w for w in warnings), warnings
     assert any("no_such_photo.png" in w and "no pixels" in w for w in warnings), warnings
-    assert any("'Bulb'" in w for w in warnings), warnings
+    assert any("'Bulb'" in w and "off" in w for w in warnings), warnings
     panel = _module("panels.main")
     lines = panel.warning_lines(bpy.context.scene)
     assert any("NoUV" in t for t in lines)

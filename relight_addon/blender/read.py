@@ -28,8 +28,14 @@ repeated by ``tests/test_bridge_read.py``):
   ``diffuse_factor`` scales what diffuse surfaces receive and is folded into M.
 * Emission shader / Principled "Emission Strength" ``S`` with colour ``C``: radiance ``S * C``
   (a surface of strength 1 renders as pixel value 1), so exitance ``M = pi * S * C``
-  (measured 3.1398 / pi = 0.9994).  Cycles mesh emission is two-sided; here a face emits from its
-  front side only (documented limitation).
+  (measured 3.1398 / pi = 0.9994), on both sides of the face as in Cycles: each emissive face
+  is read with a copy facing the other way.
+* Point, spot and sun lights, and area lights with a spread below 180 degrees, are read as the
+  core's ``Lights`` (core/lights.py, whose units were measured against Cycles:
+  benchmarks/results/light_units.md): point and spot intensity P / (4 pi) W/sr with their
+  radius and soft falloff, spot cone and blend, sun strength in W/m^2 and its angle.  The
+  colour of every light is colour x 2**exposure (x its blackbody colour); ``diffuse_factor`` is
+  ignored, as Cycles does.
 
 The depsgraph defaults to the context's (viewport) one, so modifiers use their viewport levels;
 pass ``depsgraph=`` a render-mode depsgraph to read render levels.
@@ -50,6 +56,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.lights import Lights
 from ..core.scene import RHO_MAX, ImageTexels, SceneData
 from ..core.texture.colour import srgb_to_linear
 
@@ -60,6 +67,7 @@ ROLES = ("relit", "occluder", "ignored")
 ROLE_PROPERTY = "relight_role"
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 AREA_SHAPES = {"SQUARE", "RECTANGLE", "DISK", "ELLIPSE"}
+LIGHT_TYPES = {"POINT", "SPOT", "SUN", "AREA"}
 # A disk/ellipse lamp is a fan of this many planar quads around its centre (2 * DISK_QUADS
 # polygon vertices), scaled so that its area equals the ellipse's.
 DISK_QUADS = 8
@@ -325,6 +333,15 @@ def _mesh_faces(me, report: ReadReport):
     return np.concatenate(parts).astype(np.int64), np.concatenate(polys).astype(np.int64)
 
 
+def reverse_winding(corners):
+    """The same patches facing the other way: (a, b, c, d) -> (a, d, c, b), triangles
+    (a, b, c, c) -> (a, c, b, b) (the repeated corner stays last).  Works on (p, 4, ...)."""
+    out = corners[:, [0, 3, 2, 1]]
+    tri = np.all(corners[:, 2] == corners[:, 3], axis=tuple(range(1, corners.ndim - 1)))
+    out[tri] = corners[tri][:, [0, 2, 1, 1]]
+    return out
+
+
 def _uv_layer(me, name):
     layers = me.uv_layers
     if name:
@@ -363,18 +380,67 @@ def _area_light_polygon(light):
     return np.stack([centre, ring[i], ring[i + 1], ring[(i + 2)]], axis=1)
 
 
+def light_colour(light) -> np.ndarray:
+    """A light's radiant colour (3,): colour x 2**exposure (x its blackbody colour with
+    ``use_temperature``).  ``diffuse_factor`` is left out: Cycles ignores it for diffuse bakes
+    and renders (measured, benchmarks/results/light_units.md)."""
+    colour = _rgb(light.color) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    if getattr(light, "use_temperature", False):
+        colour = colour * _rgb(light.temperature_color)
+    return colour
+
+
 def area_light_exitance(light, area: float, energy=None) -> np.ndarray:
     """Exitance (W/m^2, RGB) of a Blender area light of world-space area ``area``, at its own
     power or at ``energy``."""
     energy = float(light.energy if energy is None else energy)
-    power = energy * 2.0 ** float(getattr(light, "exposure", 0.0))
-    colour = _rgb(light.color)
-    if getattr(light, "use_temperature", False):
-        colour = colour * _rgb(light.temperature_color)
-    colour = colour * float(getattr(light, "diffuse_factor", 1.0))
     if getattr(light, "normalize", True):
-        return colour * power / max(area, 1e-300)
-    return colour * power
+        return light_colour(light) * energy / max(area, 1e-300)
+    return light_colour(light) * energy
+
+
+def point_light_intensity(light, energy) -> np.ndarray:
+    """Radiant intensity (W/sr, RGB) of a point or spot light at power ``energy``: P / (4 pi),
+    or, with Normalize off, the radiance P / pi over its disk (x 4 pi r^2; x 4 at radius 0)."""
+    r = float(light.shadow_soft_size)
+    power = float(energy)
+    if not getattr(light, "normalize", True):
+        power *= 4.0 * np.pi * r * r if r > 0 else 4.0
+    return light_colour(light) * power / (4.0 * np.pi)
+
+
+def sun_irradiance(light, energy) -> np.ndarray:
+    """Irradiance (W/m^2, RGB) of a sun on a plane facing it; with Normalize off its strength is
+    the disc's radiance (x pi sin^2(angle / 2); angle 0 unchanged)."""
+    s = float(energy)
+    sb = np.sin(0.5 * float(light.angle))
+    if not getattr(light, "normalize", True) and sb > 1e-6:
+        s *= np.pi * sb * sb
+    return light_colour(light) * s
+
+
+def _analytic_light(light, matrix, lamp, energy):
+    """The core's Lights row of a point, spot or sun light, or of an area light with a
+    spread below 180 degrees (``energy``: the power it is read at)."""
+    from ..core.lights import AREA, POINT, SPOT, SUN, Lights
+    t = light.type
+    soft = bool(getattr(light, "use_soft_falloff", True))
+    if t in ("POINT", "SPOT"):
+        kw = dict(radius=float(light.shadow_soft_size), soft_falloff=soft)
+        if t == "SPOT":
+            kw.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
+        return Lights.make(SPOT if t == "SPOT" else POINT, lamp, matrix,
+                           point_light_intensity(light, energy), **kw)
+    if t == "SUN":
+        return Lights.make(SUN, lamp, matrix, sun_irradiance(light, energy),
+                           angle=float(light.angle))
+    sx = float(light.size)
+    sy = float(light.size_y) if light.shape in {"RECTANGLE", "ELLIPSE"} else sx
+    scale = np.linalg.norm(np.asarray(matrix, float)[:3, :3], axis=0)
+    rnd = light.shape in {"DISK", "ELLIPSE"}
+    area = sx * scale[0] * sy * scale[1] * (np.pi / 4 if rnd else 1.0)
+    return Lights.make(AREA, lamp, matrix, area_light_exitance(light, area, energy),
+                       size=(sx * scale[0], sy * scale[1]), round=rnd, spread=float(light.spread))
 
 
 # -- the reader --------------------------------------------------------------------------------
@@ -443,6 +509,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
     corners, rho, emission, lamp, occluder, group, uvs, image_idx = ([] for _ in range(8))
     lamp_names: list = []
     lamp_intensity: list = []    # per lamp: its power in the photo over the power it is read at
+    light_rows: list = []        # core Lights of the lamps that are not patches
     emissive_lamp: dict = {}     # (object, material) -> lamp index
 
     labels_seen: dict = {}
@@ -472,42 +539,47 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
         matrix = np.array(inst.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             light = ev.data
-            if light.type != "AREA" or light.shape not in AREA_SHAPES:
-                report.warn(f"Light '{label}' ({light.type.lower()}) is not supported yet and "
-                            "is ignored: use an area light or an emissive face")
+            if light.type not in LIGHT_TYPES or (light.type == "AREA" and
+                                                 light.shape not in AREA_SHAPES):
+                report.warn(f"Light '{label}' ({light.type.lower()}) is not supported and is "
+                            "ignored")
                 continue
-            if float(getattr(light, "spread", np.pi)) < np.pi - 1e-6:
-                report.warn(f"Light '{label}': spread below 180 degrees is treated as a "
-                            "Lambertian (180 degree) emitter")
             if getattr(light, "use_nodes", False) and light.node_tree is not None:
                 report.warn(f"Light '{label}': light nodes are ignored")
-            m = matrix
-            local = _area_light_polygon(light)
-            if np.linalg.det(m[:3, :3]) < 0:
-                local = local[:, ::-1]
-            quads = _transform(m, local.reshape(-1, 3)).reshape(-1, 4, 3)
-            cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
-            area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
-            if not area > 0:
-                report.warn(f"Light '{label}' has zero area and is ignored")
-                continue
             # A lamp that is off in the photo still gets its basis (light transport is linear),
             # computed at a reference power; the photo sees it at intensity 0.
             power = float(light.energy)
             power_ref = power if power > 0 else reference_power(light)
-            exitance = area_light_exitance(light, area, power_ref)
-            if not np.any(exitance > 0):
+            if not np.any(light_colour(light) > 0):
                 report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
                 continue
+            patches = light.type == "AREA" and float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
+            if patches:
+                local = _area_light_polygon(light)
+                if np.linalg.det(matrix[:3, :3]) < 0:
+                    local = local[:, ::-1]
+                quads = _transform(matrix, local.reshape(-1, 3)).reshape(-1, 4, 3)
+                cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
+                area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
+                if not area > 0:
+                    report.warn(f"Light '{label}' has zero area and is ignored")
+                    continue
             if power <= 0:
+                unit = "W/m^2" if light.type == "SUN" else "W"
                 report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
-                            f"its map is computed at {power_ref:g} W, so raising its power "
+                            f"its map is computed at {power_ref:g} {unit}, so raising its power "
                             "switches it on")
             k = len(lamp_names)
             lamp_names.append(label)
             lamp_intensity.append(power / power_ref)
             report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
-                                        "power_photo": power, "power_ref": power_ref})
+                                        "type": light.type, "power_photo": power,
+                                        "power_ref": power_ref})
+            report.lamps += 1
+            if not patches:
+                light_rows.append(_analytic_light(light, matrix, k, power_ref))
+                continue
+            exitance = area_light_exitance(light, area, power_ref)
             q = len(quads)
             corners.append(quads)
             rho.append(np.zeros((q, 3)))
@@ -518,7 +590,6 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             report.groups.append((label, ""))
             uvs.append(np.zeros((q, 4, 2)))
             image_idx.append(np.full(q, -1))
-            report.lamps += 1
             report.lamp_patches += q
             continue
 
@@ -544,9 +615,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                             "vertex coordinates (NaN or infinite) and are skipped")
                 loops, poly = loops[finite], poly[finite]
             if np.linalg.det(matrix[:3, :3]) < 0:
-                loops = loops[:, [0, 3, 2, 1]]  # mirrored: keep the winding (a, b, c, c) -> (a, c, c, b)
-                tri = loops[:, 1] == loops[:, 2]
-                loops[tri] = loops[tri][:, [0, 2, 3, 3]]
+                loops = reverse_winding(loops)   # mirrored: keep the faces' outward side
             p = len(loops)
             obj_corners = co[loop_vert[loops]]
             mat_index = _get(me.polygons, "material_index", len(me.polygons), 1, np.int32)[poly]
@@ -612,6 +681,18 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             group.append(obj_group)
             uvs.append(obj_uv)
             image_idx.append(obj_img)
+            # Cycles' mesh emission is two-sided: the back of an emissive face emits too (a
+            # copy facing the other way; the front already blocks rays).
+            em = np.flatnonzero(obj_lamp >= 0)
+            if len(em):
+                corners.append(reverse_winding(obj_corners[em]))
+                rho.append(np.zeros((len(em), 3)))
+                emission.append(obj_em[em])
+                lamp.append(obj_lamp[em])
+                occluder.append(np.zeros(len(em), bool))
+                group.append(obj_group[em])
+                uvs.append(reverse_winding(obj_uv[em]))
+                image_idx.append(np.full(len(em), -1))
         finally:
             ev.to_mesh_clear()
 
@@ -633,7 +714,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
         emission=cat(emission, (0, 3), np.float64), lamp=cat(lamp, (0,), np.int32),
         lamp_names=lamp_names, occluder=cat(occluder, (0,), bool), group=cat(group, (0,), np.int32),
         uv=cat(uvs, (0, 4, 2), np.float64), image=cat(image_idx, (0,), np.int32),
-        images=image_list, viewpoint=viewpoint, lamp_intensity=np.array(lamp_intensity, float))
+        images=image_list, viewpoint=viewpoint, lamp_intensity=np.array(lamp_intensity, float),
+        lights=Lights.concat(light_rows))
     report.zero_area_skipped = data.dropped_degenerate
     report.duplicates_skipped = data.dropped_duplicate
     for dropped, kept in data.duplicate_groups:

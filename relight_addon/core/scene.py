@@ -84,6 +84,8 @@ class SceneData:
                         emission here: a lamp that is off in the photo keeps a reference emission
                         (light transport is linear, so its basis can still be solved) with
                         intensity 0.  Default: every lamp at 1.
+    lights    Lights    lamps that are not patches (point, spot, sun, area with a spread):
+                        core/lights.py; each row names its lamp index.
     """
 
     corners: np.ndarray
@@ -98,6 +100,7 @@ class SceneData:
     images: list = field(default_factory=list)
     viewpoint: np.ndarray | None = None
     lamp_intensity: np.ndarray | None = None
+    lights: object = None
     dropped_degenerate: int = 0
     dropped_duplicate: int = 0
     duplicate_groups: list = field(default_factory=list)   # (dropped group, kept group) pairs
@@ -118,9 +121,13 @@ class SceneData:
             raise SceneError("Reflectance must lie in [0, 1): a value of 1 or more never converges")
         if np.any(self.emission < 0) or not np.all(np.isfinite(self.emission)):
             raise SceneError("Emission must be finite and non-negative")
-        if self.lamp.size and self.lamp.max(initial=-1) >= len(self.lamp_names):
+        from .lights import Lights
+        if self.lights is None:
+            self.lights = Lights.empty()
+        top = max(int(self.lamp.max(initial=-1)), int(self.lights.lamp.max(initial=-1)))
+        if top >= len(self.lamp_names):
             self.lamp_names = list(self.lamp_names) + [
-                f"lamp {i}" for i in range(len(self.lamp_names), int(self.lamp.max()) + 1)]
+                f"lamp {i}" for i in range(len(self.lamp_names), top + 1)]
         emitting = self.emission.max(axis=1) > 0
         if np.any(emitting & (self.lamp < 0)):
             raise SceneError("Every emitting patch needs a lamp index")
@@ -228,7 +235,8 @@ class SceneData:
             raise SceneError("The scene has no usable faces")
         lit = np.zeros(self.n_lamps, bool)
         on = self.lamp >= 0
-        lit[self.lamp[on]] = self.emission[on].max(axis=1) > 0
+        np.logical_or.at(lit, self.lamp[on], self.emission[on].max(axis=1) > 0)
+        np.logical_or.at(lit, self.lights.lamp, self.lights.intensity.max(axis=1) > 0)
         if not np.any(lit & (self.lamp_intensity > 0)):
             if np.any(self.lamp >= 0):
                 raise SceneError("Every lamp has zero power: set the real lamps to their power "
@@ -266,7 +274,8 @@ def scene_fingerprint(data: SceneData, textures: bool = True) -> str:
         peak = emission[sel].max() if sel.any() else 0.0
         if peak > 0:
             colour[sel] = emission[sel] / peak
-    arrays = [data.corners, colour, data.lamp, data.occluder, data.group]
+    arrays = [data.corners, colour, data.lamp, data.occluder, data.group,
+              *data.lights.fingerprint_arrays()]
     if textures:
         arrays += [data.rho] + [a for a in (data.uv, data.image) if a is not None]
     for a in arrays:

@@ -2,6 +2,12 @@
 
 The solution is kept as one basis B_k per lamp on the leaves, with fixed links, so that
 B = sum_k I_k B_k for any lamp intensities I_k (light transport is linear in the exitances).
+
+Lamps that are not patches (``scene.lights``: point, spot, sun, area with a spread) reach the
+leaves as direct irradiance, averaged over each leaf's quadrature points with visibility rays;
+a leaf's emission in lamp k's basis is then rho x that irradiance.  During refinement the
+oracle sees their light on every element (mean and spread over five points), so that what they
+light brightly or unevenly is split as a source like any other.
 """
 from __future__ import annotations
 
@@ -11,7 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene import SceneData
+from ..geometry.raycast import ray_offset
+from ..geometry.sampling import quadrature
+from ..lights import light_irradiance
+from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .hierarchy import Hierarchy
 from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
@@ -38,6 +47,11 @@ class RadiositySolution:
     gather: object                    # LeafGather: per-leaf F and F*V of every link
     basis: np.ndarray                 # (k, L, 3) per-lamp leaf radiosity
     info: SolveInfo
+    # Direct irradiance from scene.lights per lamp (k, L, 3) on the leaves, at unit exitance
+    # factor, with visibility and without; None when the scene has no such lights.
+    light_occ: np.ndarray | None = None
+    light_unocc: np.ndarray | None = None
+    emission_scale: np.ndarray | None = None     # (k,) factors the basis was solved with
     timings: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)   # rays cast
     # What regather() needs to recompute the leaf transport after further subdivision.
@@ -100,14 +114,73 @@ class _Timer(dict):
             self[name] = self.get(name, 0.0) + time.perf_counter() - t0
 
 
-def _lamp_emission(scene: SceneData, patch_of_leaf: np.ndarray) -> np.ndarray:
-    """(L, 3, k): each lamp's emission on the leaves."""
+def _lamp_emission(scene: SceneData, patch_of_leaf: np.ndarray, rho_leaf=None,
+                   light_occ=None) -> np.ndarray:
+    """(L, 3, k): each lamp's emission on the leaves: its patches' exitance, and rho x the
+    direct irradiance of its light on every leaf (``light_occ`` (k, L, 3))."""
     k = scene.n_lamps
     E = np.zeros((len(patch_of_leaf), 3, k))
     lamp = scene.lamp[patch_of_leaf]
     hit = lamp >= 0
     E[np.flatnonzero(hit), :, lamp[hit]] = scene.emission[patch_of_leaf[hit]]
+    if light_occ is not None:
+        E += np.moveaxis(light_occ, 0, 2) * np.asarray(rho_leaf)[:, :, None]
     return E
+
+
+def lights_on_elements(scene: SceneData, h: Hierarchy, elements, occluder, m, rays, seed,
+                       scale):
+    """Direct irradiance (k, n, 3) per lamp from ``scene.lights`` averaged over the m x m
+    quadrature points of each element: (with visibility, unoccluded); None without lights."""
+    if not len(scene.lights):
+        return None, None
+    k = scene.n_lamps
+    pts, _ = quadrature(h.corners[elements], m)
+    U, O = light_irradiance(scene.lights, pts, h.normal[elements], occluder, rays, seed,
+                            scale, ray_offset(scale))
+    occ, unocc = np.zeros((k, len(elements), 3)), np.zeros((k, len(elements), 3))
+    for i, lamp in enumerate(scene.lights.lamp):
+        occ[lamp] += O[:, i]
+        unocc[lamp] += U[:, i]
+    return occ, unocc
+
+
+# Where the oracle samples the lights on an element: centre and four points near the corners.
+_LIGHT_PROBES = np.array([[0.5, 0.5], [0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]])
+
+
+class _LightEstimates:
+    """The oracle's view of ``scene.lights``: per element, the mean (3,) over the five probe
+    points of the lights' direct irradiance (all lamps at their scene intensity) and its spread
+    (max - min, brightest channel), computed once per element."""
+
+    def __init__(self, scene, h, occluder, rays, rng, scale):
+        self.scene, self.h, self.occluder, self.rays, self.scale = scene, h, occluder, rays, scale
+        self.rng = rng
+        self.mean = np.zeros((0, 3))
+        self.spread = np.zeros(0)
+        self.done = np.zeros(0, bool)
+
+    def get(self, elements):
+        h = self.h
+        if len(self.done) < h.n:
+            grow = h.n - len(self.done)
+            self.mean = np.concatenate([self.mean, np.zeros((grow, 3))])
+            self.spread = np.concatenate([self.spread, np.zeros(grow)])
+            self.done = np.concatenate([self.done, np.zeros(grow, bool)])
+        todo = np.unique(elements[~self.done[elements]])
+        if len(todo):
+            pts = bilinear_point(h.corners[todo][:, None], _LIGHT_PROBES[None, :, 0],
+                                 _LIGHT_PROBES[None, :, 1])                  # (n, 5, 3)
+            nrm = np.repeat(h.normal[todo], len(_LIGHT_PROBES), axis=0)
+            _, O = light_irradiance(self.scene.lights, pts.reshape(-1, 3), nrm, self.occluder,
+                                    self.rays, int(self.rng.integers(2**31)), self.scale,
+                                    ray_offset(self.scale))
+            per_point = O.sum(axis=1).reshape(len(todo), len(_LIGHT_PROBES), 3)
+            self.mean[todo] = per_point.mean(axis=1)
+            self.spread[todo] = (per_point.max(axis=1) - per_point.min(axis=1)).max(axis=1)
+            self.done[todo] = True
+        return self.mean[elements], self.spread[elements]
 
 
 def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_area):
@@ -217,6 +290,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             r0, s0 = initial_pairs(h, receives, sends, scale)
             cV = np.ones(0)
 
+    lights = _LightEstimates(scene, h, occluder, q.oracle_rays, rng, scale) \
+        if len(scene.lights) else None
+
     def leaf_system(receiver, source, transport, links_are_leaf_entries=False):
         cls = LeafSystem if links_are_leaf_entries else LeafSystem.from_links
         system = cls(h, receiver, source, transport, scene.rho)
@@ -229,12 +305,19 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     def estimate_radiosity(links: LinkSet):
         """Solve on the oracle's estimates: radiosity and its spread per element."""
         system = leaf_system(links.receiver, links.source, links.F * links.V)
-        B, _ = system.solve(scene.emission[system.patch], "gmres", tol=1e-4)
+        E = scene.emission[system.patch]
+        if lights is not None:
+            light_mean, light_spread = lights.get(system.leaves)
+            E = E + system.rho * light_mean
+        B, _ = system.solve(E, "gmres", tol=1e-4)
         b_leaf = B.max(axis=1)
         b_elem = system.P_up @ b_leaf
         reflected = b_leaf[e_max[system.patch] == 0]
         spread = np.maximum(_spread_over_leaves(h, system, b_leaf),
                             _spread_within(h, links, b_elem, rho_max))
+        if lights is not None:          # a leaf's own light varies across it
+            spread[system.leaves] = np.maximum(spread[system.leaves],
+                                               rho_max[system.patch] * light_spread)
         b_scale = float(reflected.max()) if len(reflected) else float(e_max.max())
         return b_elem, spread, max(b_scale, 1e-300)
 
@@ -293,16 +376,21 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                                                timer=timer)
     links = LinkSet(kept.receiver, kept.source, F, V, vis)
 
+    with timer("lights"):
+        system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
+        light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, occluder,
+                                                    q.quadrature, q.rays,
+                                                    int(rng.integers(2**31)), scale)
     report(0.9, "Solving per-lamp radiosity")
     with timer("solve"):
-        system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
-        E = _lamp_emission(scene, system.patch)
+        E = _lamp_emission(scene, system.patch, system.rho, light_occ)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
     counts = {"rays": occluder.rays if occluder is not None else 0, "cluster_links": len(cX)}
     context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV)}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
-                             dict(timer), counts, context)
+                             light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
+                             counts, context)
 
 
 def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=None):
@@ -325,6 +413,9 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     if len(cX):
         system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
     solution.system = system
+    solution.light_occ, solution.light_unocc = lights_on_elements(
+        solution.scene, h, system.leaves, ctx.get("occluder"), q.quadrature, q.rays,
+        int(rng.integers(2**31)), ctx.get("scale", 1.0))
     solve_basis(solution, rho_leaf, emission_scale)
     return solution
 
@@ -335,10 +426,12 @@ def solve_basis(solution: RadiositySolution, rho_leaf=None, emission_scale=None)
     system = solution.system
     if rho_leaf is not None:
         system.rho = np.asarray(rho_leaf, float)
-    E = _lamp_emission(solution.scene, system.patch)
-    if emission_scale is not None:
-        E = E * np.asarray(emission_scale, float)[None, None, :]
-    basis, info = system.solve(E, solution.quality.solver, tol=solution.quality.tol)
+    scale = np.ones(solution.scene.n_lamps) if emission_scale is None else \
+        np.asarray(emission_scale, float).copy()
+    E = _lamp_emission(solution.scene, system.patch, system.rho, solution.light_occ)
+    basis, info = system.solve(E * scale[None, None, :], solution.quality.solver,
+                               tol=solution.quality.tol)
     solution.basis = np.moveaxis(basis, 2, 0)
     solution.info = info
+    solution.emission_scale = scale
     return solution

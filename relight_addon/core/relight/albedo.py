@@ -79,8 +79,7 @@ def albedo_rounds(sol, tm, values, use_patch, rho_mean, rounds, scale, unocclude
     rho = sol.system.rho.copy()
     solve_basis(sol, rho, scale)
     for _ in range(max(rounds, 1)):
-        g = Transport(sol).unocc if unoccluded else sol.system
-        H = g.gather(sol.radiosity())
+        H = Transport(sol).total(sol.radiosity(), sol.scene.lamp_intensity, unoccluded)
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.where(H > 1e-12 * max(H.max(), 1e-300), obs / np.where(H > 0, H, 1.0), np.nan)
         ok = use[:, None] & np.isfinite(r)

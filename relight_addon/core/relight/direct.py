@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.sampling import R2, area_uniform_uv
+from ..lights import light_irradiance
 from ..geometry.formfactor import point_kernel, point_to_polygon
 from ..geometry.raycast import ray_offset
 from ..scene import SceneData, bilinear_point, quad_area_normal
@@ -60,10 +61,11 @@ def _cast(occluder, eps, origins, normals, table, lamp_normal, j0, start, count)
 
 def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int = 16, seed=0,
                     exitance_scale=None):
-    """Direct irradiance (n, k, 3) from each of the scene's k lamps: returns (unoccluded, with
-    visibility).  ``points`` (n, 3), or (n, S, 3) for groups of S points whose mean is wanted
-    (a texel's footprint), with ``normals`` (n, 3).  ``exitance_scale`` (k,) multiplies each
-    lamp's exitance.  Without an occluder the two are equal."""
+    """Direct irradiance (n, k, 3) from each of the scene's k lamps (lamp patches and the
+    ``scene.lights``): returns (unoccluded, with visibility).  ``points`` (n, 3), or (n, S, 3)
+    for groups of S points whose mean is wanted (a texel's footprint), with ``normals`` (n, 3).
+    ``exitance_scale`` (k,) multiplies each lamp's exitance.  Without an occluder the two are
+    equal."""
     points = np.asarray(points, float)
     points = points.reshape(len(points), -1, 3) if points.ndim == 3 else points.reshape(-1, 1, 3)
     normals = np.asarray(normals, float).reshape(-1, 3)
@@ -71,13 +73,22 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
     k = scene.n_lamps
     unocc = np.zeros((n, k, 3))
     occ = np.zeros((n, k, 3))
-    lamp_patches = np.flatnonzero(scene.lamp >= 0)
-    if n == 0 or len(lamp_patches) == 0:
+    if n == 0:
         return unocc, occ
     scale_k = np.ones(k) if exitance_scale is None else np.asarray(exitance_scale, float)
     lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
-    eps = ray_offset(np.linalg.norm(hi - lo))
+    size = float(np.linalg.norm(hi - lo))
+    eps = ray_offset(size)
     rng = np.random.default_rng(seed)
+    if len(scene.lights):
+        lu, lo_ = light_irradiance(scene.lights, points, normals, occluder, rays,
+                                   int(rng.integers(2**31)), size, eps)
+        for i, lamp in enumerate(scene.lights.lamp):
+            unocc[:, lamp] += lu[:, i] * scale_k[lamp]
+            occ[:, lamp] += lo_[:, i] * scale_k[lamp]
+    lamp_patches = np.flatnonzero(scene.lamp >= 0)
+    if len(lamp_patches) == 0:
+        return unocc, occ
     corners = scene.corners[lamp_patches]
     _, lamp_normal = quad_area_normal(corners)
     table = _lamp_tables(corners)
@@ -116,7 +127,7 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
         slot = pi * k + lamp_k[li]
         contrib = F[:, None] * exitance[li]
         for ch in range(3):
-            unocc[start:start + c, :, ch] = np.bincount(slot, contrib[:, ch], c * k).reshape(c, k)
-            occ[start:start + c, :, ch] = np.bincount(slot, contrib[:, ch] * frac,
-                                                      c * k).reshape(c, k)
+            unocc[start:start + c, :, ch] += np.bincount(slot, contrib[:, ch], c * k).reshape(c, k)
+            occ[start:start + c, :, ch] += np.bincount(slot, contrib[:, ch] * frac,
+                                                       c * k).reshape(c, k)
     return unocc, occ

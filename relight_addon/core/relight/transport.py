@@ -3,7 +3,9 @@
 The solution's leaf gather holds, for every (leaf, source) entry, the unoccluded form factor F
 and the form factor with visibility F V.  Gathering a per-lamp basis through each gives the
 occluded and unoccluded irradiance of every leaf, and restricted to lamp sources their direct
-parts: the four quantities the shadow-free pipeline divides (seed 000 eq 4.5-4.6).
+parts: the four quantities the shadow-free pipeline divides (seed 000 eq 4.5-4.6).  Lamps that
+are not patches (``scene.lights``) add their direct irradiance per leaf, stored with the
+solution, at the exitance factors the basis was solved with.
 """
 from __future__ import annotations
 
@@ -25,6 +27,11 @@ class Transport:
         lamp_src = sol.scene.lamp[h.patch[g.source]] >= 0
         self.dir_occ = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.FV[lamp_src], rho)
         self.dir_unocc = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.F[lamp_src], rho)
+        self.light_occ = self.light_unocc = 0.0
+        if sol.light_occ is not None:
+            s = np.ones(sol.scene.n_lamps) if sol.emission_scale is None else sol.emission_scale
+            self.light_occ = sol.light_occ * s[:, None, None]          # (k, L, 3)
+            self.light_unocc = sol.light_unocc * s[:, None, None]
 
     @staticmethod
     def _per_lamp(system, basis):
@@ -34,8 +41,19 @@ class Transport:
 
     def irradiance(self, basis):
         """Per lamp (k, L, 3): occluded, unoccluded, direct occluded, direct unoccluded."""
-        return (self._per_lamp(self.occ, basis), self._per_lamp(self.unocc, basis),
-                self._per_lamp(self.dir_occ, basis), self._per_lamp(self.dir_unocc, basis))
+        lo, lu = self.light_occ, self.light_unocc
+        return (self._per_lamp(self.occ, basis) + lo, self._per_lamp(self.unocc, basis) + lu,
+                self._per_lamp(self.dir_occ, basis) + lo,
+                self._per_lamp(self.dir_unocc, basis) + lu)
+
+    def total(self, radiosity, intensities, unoccluded=False):
+        """Leaf irradiance (L, 3) of a leaf radiosity (L, 3) lit by lamps at ``intensities``."""
+        system, light = (self.unocc, self.light_unocc) if unoccluded else \
+            (self.occ, self.light_occ)
+        H = system.gather(radiosity)
+        if not np.isscalar(light):
+            H = H + np.tensordot(np.asarray(intensities, float), light, axes=1)
+        return H
 
 
 def as_given(per_lamp, scene):
