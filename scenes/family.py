@@ -14,7 +14,7 @@ Two halves, like the office:
 * bpy-free: ``room_spec(index) -> RoomSpec`` (deterministic from the index), ``FAMILY``,
   ``TEST_ROOMS``, ``HELD_OUT``, ``coverage(surface)``, ``spec_hash(spec)``, ``load_bakes(index)``.
 * bpy: ``build_room(spec, orientation="visible")`` creates the room in the current
-  (factory-empty) scene; ``bake_room(...)`` is driven by ``benchmarks/family_bakes.py``.
+  (factory-empty) scene; ``benchmarks/family_bakes.py`` builds and bakes every room.
 
 Conventions (as :mod:`scenes.office`): metres, z up; a surface is one object made of planar
 quads ``(n, 4, 3)`` whose corners are counter-clockwise around the VISIBLE normal (the side
@@ -307,7 +307,7 @@ def _wall_length(W, D, wall):
     return W if wall in ("Wall South", "Wall North") else D
 
 
-def _furniture_boxes(kind, lo, hi, rng, against=None):
+def _furniture_boxes(kind, lo, hi):
     """Box list (lo, hi, skip) of a piece of furniture in the footprint lo..hi (x, y) of height
     hi[2]."""
     (x0, y0, _), (x1, y1, z1) = lo, hi
@@ -380,7 +380,7 @@ class _Room:
 
     def furniture(self, name, kind, lo, hi, pattern="noise", level=None, rotate=0, texel=None):
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-        boxes = _furniture_boxes(kind, lo, hi, self.rng)
+        boxes = _furniture_boxes(kind, lo, hi)
         faces = []
         for blo, bhi, skip in boxes:
             faces += _box_faces(blo, bhi, skip)
