@@ -26,7 +26,8 @@ tail is < 0.8^17 ~ 2 % of the indirect light at worst, far less in practice), bl
 
 Cache: key = sha256 of (evaluated world-space vertices and UVs of every baked object, the pixels of
 every image its materials use, every light's matrix / type / shape / size / colour / effective
-power, samples, seed, bounces, margin, bake size, bpy version) -> ``<cache_dir>/<key>.npz``.
+power (and radius / spot / sun angle for non-area lights), every emissive mesh's geometry /
+colour / effective strength, samples, seed, bounces, margin, bake size, bpy version) -> ``<cache_dir>/<key>.npz``.
 ``cache_dir`` defaults to ``$RELIGHT_BAKE_CACHE`` or ``<repo>/.cache/bakes``.  ``CACHE_STATS``
 counts hits and misses (tests use it).
 
@@ -43,6 +44,9 @@ import numpy as np
 
 BAKE_TO_RADIOSITY = np.pi  # bake value x this = radiosity (exitance, W/m^2), measured
 CACHE_STATS = {"hits": 0, "misses": 0, "bake_seconds": []}
+# The last bake_lighting call: {"seconds": time of the Cycles bake (for a cache hit: as recorded
+# when it was baked, None for entries older than this record), "cached": bool}.
+LAST_BAKE = {"seconds": None, "cached": False}
 _REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -56,11 +60,49 @@ def _bpy():
 
 
 def surface_objects(scene=None):
-    """Renderable mesh objects of the scene (the relit surfaces), sorted by name."""
+    """Renderable mesh objects of the scene (the relit surfaces), sorted by name; emissive
+    meshes (lamps, see ``emission_nodes``) are not surfaces."""
     bpy = _bpy()
     scene = scene or bpy.context.scene
-    return sorted((o for o in scene.objects if o.type == "MESH" and not o.hide_render),
+    return sorted((o for o in scene.objects
+                   if o.type == "MESH" and not o.hide_render and not emission_nodes(o)),
                   key=lambda o: o.name)
+
+
+def emission_nodes(obj) -> list:
+    """The Emission nodes of an emissive mesh (a lamp made of geometry): a mesh whose materials
+    have Emission nodes and no Principled BSDF.  Its "power" in ``bake_lighting`` is their
+    Strength (outgoing radiance; exitance pi x Strength per emitting side).  [] otherwise."""
+    if obj.type != "MESH":
+        return []
+    nodes = []
+    for slot in obj.material_slots:
+        mat = slot.material
+        if mat is None or mat.node_tree is None:
+            continue
+        if any(nd.bl_idname == "ShaderNodeBsdfPrincipled" for nd in mat.node_tree.nodes):
+            return []
+        nodes += [nd for nd in mat.node_tree.nodes if nd.bl_idname == "ShaderNodeEmission"]
+    return nodes
+
+
+def _lamp_power(obj) -> float:
+    """A light's energy, or an emissive mesh's Emission strength."""
+    if obj.type == "LIGHT":
+        return float(obj.data.energy)
+    return float(emission_nodes(obj)[0].inputs["Strength"].default_value)
+
+
+def _set_lamp_power(obj, value):
+    if obj.type == "LIGHT":
+        obj.data.energy = float(value)
+    else:
+        for nd in emission_nodes(obj):
+            nd.inputs["Strength"].default_value = float(value)
+
+
+def _is_lamp(obj) -> bool:
+    return obj.type == "LIGHT" or bool(emission_nodes(obj))
 
 
 def _albedo_image(obj):
@@ -141,6 +183,27 @@ def _cache_key(scene, objs, lamp_powers, samples, seed, bounces, margin, default
              getattr(L, "size_y", None), tuple(L.color), power, getattr(L, "normalize", True),
              getattr(L, "exposure", 0.0), lo.hide_render))
         add(np.round(np.array(lo.matrix_world, np.float64), 6))
+        if L.type != "AREA":  # (only for these types: area-light keys stay as they were)
+            add((getattr(L, "shadow_soft_size", None), getattr(L, "spot_size", None),
+                 getattr(L, "spot_blend", None), getattr(L, "angle", None),
+                 getattr(L, "use_soft_falloff", None)))
+    for eo in sorted((o for o in scene.objects if o.type == "MESH" and emission_nodes(o)),
+                     key=lambda o: o.name):
+        me = eo.data
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        loops = np.empty(len(me.loops), np.int32)
+        me.loops.foreach_get("vertex_index", loops)
+        nodes = emission_nodes(eo)
+        power = float(lamp_powers.get(eo.name, _lamp_power(eo)))
+        mats = [(s.material.name, getattr(s.material, "emission_sampling", None),
+                 sorted(nd.bl_idname for nd in s.material.node_tree.nodes))
+                for s in eo.material_slots if s.material is not None]
+        add(("emitter", eo.name, power, tuple(nodes[0].inputs["Color"].default_value),
+             len(nodes), mats, eo.hide_render))
+        add(np.round(co, 6))
+        add(loops)
+        add(np.round(np.array(eo.matrix_world, np.float64), 6))
     w = scene.world
     add(None if w is None else (w.name, tuple(getattr(w, "color", ()))))
     return h.hexdigest()
@@ -229,7 +292,8 @@ def bake_lighting(lamp_powers: dict, samples: int = 64, seed: int = 0, cache_dir
                   use_cache: bool = True) -> dict:
     """DIFFUSE bakes (direct + indirect + colour) of every surface object under ``lamp_powers``.
 
-    lamp_powers: light object name -> power (W); other lights keep their power.  objects: names
+    lamp_powers: light object name -> power (W), or emissive mesh name -> Emission strength;
+    other lamps keep their power.  objects: names
     (default: every renderable mesh).  texture_size: bake size for objects without an albedo
     image.  Returns {object name: (H, W, 3) float32}, bake units (radiance; x BAKE_TO_RADIOSITY
     for radiosity).
@@ -240,8 +304,8 @@ def bake_lighting(lamp_powers: dict, samples: int = 64, seed: int = 0, cache_dir
     objs = (surface_objects(scene) if objects is None
             else [bpy.data.objects[n] for n in objects])
     for name in lamp_powers:
-        if name not in scene.objects or scene.objects[name].type != "LIGHT":
-            raise KeyError(f"no light object {name!r} in the scene")
+        if name not in scene.objects or not _is_lamp(scene.objects[name]):
+            raise KeyError(f"no light object or emissive mesh {name!r} in the scene")
     key = _cache_key(scene, objs, lamp_powers, samples, seed, bounces, margin, texture_size)
     cache_dir = cache_dir or default_cache_dir()
     path = os.path.join(cache_dir, key + ".npz")
@@ -249,7 +313,9 @@ def bake_lighting(lamp_powers: dict, samples: int = 64, seed: int = 0, cache_dir
         try:
             with np.load(path) as z:
                 out = {o.name: z[f"o{i}"] for i, o in enumerate(objs)}
+                secs = float(z["_seconds"]) if "_seconds" in z.files else None
             CACHE_STATS["hits"] += 1
+            LAST_BAKE.update(seconds=secs, cached=True)
             return out
         except (OSError, KeyError, ValueError):
             pass  # corrupt entry: bake again
@@ -257,17 +323,19 @@ def bake_lighting(lamp_powers: dict, samples: int = 64, seed: int = 0, cache_dir
     saved = {}
     try:
         for name, p in lamp_powers.items():
-            L = scene.objects[name].data
-            saved[name] = L.energy
-            L.energy = float(p)
+            saved[name] = _lamp_power(scene.objects[name])
+            _set_lamp_power(scene.objects[name], p)
+        t0 = time.perf_counter()
         out = _run_bake(scene, objs, samples, seed, bounces, margin, texture_size)
+        LAST_BAKE.update(seconds=time.perf_counter() - t0, cached=False)
     finally:
         for name, p in saved.items():
-            scene.objects[name].data.energy = p
+            _set_lamp_power(scene.objects[name], p)
     if use_cache:
         os.makedirs(cache_dir, exist_ok=True)
         tmp = path + f".{os.getpid()}.tmp.npz"
-        np.savez_compressed(tmp, **{f"o{i}": out[o.name] for i, o in enumerate(objs)})
+        np.savez_compressed(tmp, _seconds=np.float64(LAST_BAKE["seconds"]),
+                            **{f"o{i}": out[o.name] for i, o in enumerate(objs)})
         os.replace(tmp, path)
     return out
 
