@@ -142,8 +142,8 @@ def main(argv=None):
             rows.append((label, preset, dt, rel, {
                 "stats": {k: (round(v, 4) if isinstance(v, float) else v)
                           for k, v in res.stats.items()},
-                "exitance": rel_(res.exitance_scale), "eq 4.2": rel_(res.exitance_equal),
-                "NNLS": rel_(res.exitance_nnls)}))
+                "exitance": rel_(res.exitance_scale), "eq 4.2": rel_(res.lamps.equal),
+                "NNLS": rel_(res.lamps.nnls)}))
             print(label, preset, f"{dt:.1f}s", {k: v["all"][0] for k, v in rel.items()}, flush=True)
 
     os.makedirs(args.out, exist_ok=True)

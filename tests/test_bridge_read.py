@@ -506,3 +506,28 @@ def test_camera_viewpoint_and_solver_runs():
     sol = solve_radiosity(scene, "draft")
     b = sol.patch_radiosity()
     assert np.all(np.isfinite(b)) and b[scene.lamp < 0].max() > 0
+
+
+def test_emission_kept_on_the_front_by_a_backfacing_mix_is_one_sided():
+    quad = [(-0.3, -0.2, 0.9), (0.35, -0.2, 0.9), (0.35, 0.3, 0.9), (-0.3, 0.3, 0.9)]
+    em = mesh_object("panel", quad, [(0, 1, 2, 3)])
+    mat = bpy.data.materials.new("front glow")
+    tree = mat.node_tree
+    if tree is None:
+        mat.use_nodes = True
+        tree = mat.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 5.0
+    geo = tree.nodes.new("ShaderNodeNewGeometry")
+    black = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(geo.outputs["Backfacing"], mix.inputs["Fac"])
+    tree.links.new(emit.outputs[0], mix.inputs[1])
+    tree.links.new(black.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    em.data.materials.append(mat)
+    scene, report = read_scene(bpy.context)
+    assert report.lamps == 1 and (scene.lamp == 0).sum() == 1
+    assert np.allclose(scene.emission[scene.lamp == 0], np.pi * 5.0)

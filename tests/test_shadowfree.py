@@ -115,12 +115,31 @@ def test_noise_floor_is_small(office):
 
 
 def test_exitance_estimates(office, results):
-    """Equal real lamps: the estimated ratio is within 10 % of the truth (1); NNLS on the
-    eq 4.1 reflectances (reported) is non-negative and finite."""
+    """Equal real lamps set to their true powers: the factors keep the user's ratio (1), and
+    the photo's own estimate (shadow-edge fit) agrees within 10 %, with an uncertainty."""
     for res in results.values():
-        assert np.all(np.isfinite(res.exitance_nnls)) and np.all(res.exitance_nnls >= 0)
-        ratio = res.exitance_scale[0] / res.exitance_scale[1]
-        assert 0.9 < ratio < 1.1, ratio
+        est = res.lamps
+        assert np.all(np.isfinite(est.nnls)) and np.all(est.nnls >= 0)
+        assert res.exitance_scale[0] / res.exitance_scale[1] == pytest.approx(1.0, abs=0.1)
+    est = results["texel"].lamps
+    assert 0.9 < est.photo_ratio[0] / est.photo_ratio[1] < 1.1, est
+    assert np.all(np.isfinite(est.uncertainty)) and np.all(est.uncertainty >= 0)
+
+
+def test_user_power_30_percent_off(office):
+    """Lamp B's power 30 % too high in the scene: by default the user's ratio stays unless the
+    photo pins it down; the photo's estimate (reported, and used in "photo" mode) finds the
+    true ratio within 10 %."""
+    import copy
+    sc = copy.copy(office.scene)
+    sc.emission = office.scene.emission.copy()
+    sc.emission[sc.lamp == 1] *= 1.3
+    res = shadow_free(sc, ShadowFreeOptions(mode="texel", preset="medium", exitance="photo"))
+    true_ratio = 1.3           # photo / user exitance of lamp A over lamp B
+    got = res.lamps.photo_ratio[0] / res.lamps.photo_ratio[1]
+    assert abs(got / true_ratio - 1) < 0.1, (got, res.lamps)
+    s = res.exitance_scale
+    assert abs((s[0] / s[1]) / true_ratio - 1) < 0.1
 
 
 def test_original_lighting_matches_the_truth(office, results):

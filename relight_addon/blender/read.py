@@ -29,7 +29,8 @@ repeated by ``tests/test_bridge_read.py``):
 * Emission shader / Principled "Emission Strength" ``S`` with colour ``C``: radiance ``S * C``
   (a surface of strength 1 renders as pixel value 1), so exitance ``M = pi * S * C``
   (measured 3.1398 / pi = 0.9994), on both sides of the face as in Cycles: each emissive face
-  is read with a copy facing the other way.
+  is read with a copy facing the other way, unless a Mix Shader driven by Geometry >
+  Backfacing keeps the emission on the front.
 * Point, spot and sun lights, and area lights with a spread below 180 degrees, are read as the
   core's ``Lights`` (core/lights.py, whose units were measured against Cycles:
   benchmarks/results/light_units.md): point and spot intensity P / (4 pi) W/sr with their
@@ -207,6 +208,23 @@ class _MaterialInfo:
     emission_radiance: np.ndarray  # W/(m^2 sr); exitance is pi times this
     image_node: object = None
     uv_map: str = ""               # "" -> the active render UV map
+    two_sided: bool = True         # emission from both sides (Cycles' default)
+
+
+def _one_sided_emission(shader):
+    """An emission restricted to the front by a Mix Shader whose factor is Geometry >
+    Backfacing (emission in the first slot, nothing or a black shader in the second): returns
+    the Emission node, else None."""
+    if shader is None or shader.bl_idname != "ShaderNodeMixShader":
+        return None
+    fac = shader.inputs[0]
+    src = _through_reroutes(fac.links[0].from_node) if fac.is_linked else None
+    if src is None or src.bl_idname != "ShaderNodeNewGeometry" or \
+            fac.links[0].from_socket.name != "Backfacing":
+        return None
+    front = shader.inputs[1]
+    em = _through_reroutes(front.links[0].from_node) if front.is_linked else None
+    return em if em is not None and em.bl_idname == "ShaderNodeEmission" else None
 
 
 def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -> _MaterialInfo:
@@ -227,10 +245,13 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
         return _MaterialInfo(np.zeros(3), black)
     kind = shader.bl_idname
     emission = black
-    if kind == "ShaderNodeEmission":
-        strength = float(shader.inputs["Strength"].default_value)
-        emission = _rgb(shader.inputs["Color"].default_value) * strength
-        return _MaterialInfo(np.zeros(3), np.maximum(emission, 0.0))
+    front_only = _one_sided_emission(shader)
+    if kind == "ShaderNodeEmission" or front_only is not None:
+        node = front_only or shader
+        strength = float(node.inputs["Strength"].default_value)
+        emission = _rgb(node.inputs["Color"].default_value) * strength
+        return _MaterialInfo(np.zeros(3), np.maximum(emission, 0.0),
+                             two_sided=front_only is None)
     colour_sock = _socket_value(shader, "Base Color", "Color")
     if colour_sock is None:
         report.warn(f"Material '{name}' uses an unsupported shader ({shader.name}): "
@@ -626,6 +647,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             obj_group = np.zeros(p, np.int64)
             obj_uv = np.zeros((p, 4, 2))
             obj_img = np.full(p, -1)
+            obj_two_sided = np.zeros(p, bool)
             uv_cache: dict = {}
             for mi in np.unique(mat_index):
                 sel = mat_index == mi
@@ -651,6 +673,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                         report.lamps += 1
                     obj_lamp[sel] = emissive_lamp[key]
                     obj_em[sel] = np.pi * info.emission_radiance
+                    obj_two_sided[sel] = info.two_sided
                     report.emissive_faces += int(sel.sum())
                 layer = _uv_layer(me, info.uv_map)
                 if layer is None:
@@ -683,7 +706,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             image_idx.append(obj_img)
             # Cycles' mesh emission is two-sided: the back of an emissive face emits too (a
             # copy facing the other way; the front already blocks rays).
-            em = np.flatnonzero(obj_lamp >= 0)
+            em = np.flatnonzero((obj_lamp >= 0) & obj_two_sided)
             if len(em):
                 corners.append(reverse_winding(obj_corners[em]))
                 rho.append(np.zeros((len(em), 3)))

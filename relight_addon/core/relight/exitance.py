@@ -17,7 +17,7 @@ from scipy.optimize import nnls
 
 from ..texture.colour import LUMINANCE, luminance
 from ..texture.mapping import adjacent_texel_pairs
-from .albedo import albedo_rounds
+from .albedo import RHO_ESTIMATE_MAX, albedo_rounds
 from .transport import leaf_means
 
 
@@ -52,86 +52,232 @@ def fit_lamp_exitance(unit_basis, observed, area, channels_weight=LUMINANCE) -> 
     return ExitanceFit(E, float(rnorm / max(np.linalg.norm(b), 1e-300)), bool(rank_deficient))
 
 
-def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light):
-    """Exitance factors (photo units per scene unit) by eq 4.2, by NNLS and by the shadow-edge
-    fit (``opt.exitance``); then per-leaf albedo rounds (the basis is solved with them).
-    Returns (scale used, eq 4.2, NNLS).
+@dataclass
+class LampEstimate:
+    """What the precompute uses and what the photo says about each lamp.
+
+    scale (k,): the exitance factors used (photo units per scene unit; the scene's emission is
+    the user's light power).  photo_ratio (k,): the shadow-edge fit's relative exitance of each
+    lamp on in the photo (geometric mean 1 over them; 1 for a single lamp, nan for lamps off
+    in the photo), i.e. the photo's view of each lamp against the user's power;
+    uncertainty (k,): its 1-sigma relative uncertainty (jackknife over the photographed
+    surfaces; inf when it cannot be told); applied (k,): whether the photo's ratio was used.
+    equal (k,), nnls (k,): eq 4.2 and NNLS factors, reported."""
+    scale: np.ndarray
+    photo_ratio: np.ndarray
+    uncertainty: np.ndarray
+    applied: np.ndarray
+    equal: np.ndarray
+    nnls: np.ndarray
+    method: str
+    rho_mean: float = float("nan")     # rho^, the mean reflectance used (fitted or given)
+
+
+# The photo's ratio replaces the user's (mode "user") only when it is pinned down: its
+# uncertainty -- the jackknife's and the fit's own bias MODEL_SIGMA, measured on the room family
+# with exact powers (benchmarks/results/family.md) -- below PINNED_SIGMA, and its distance from
+# 1 above PINNED_Z of it.
+MODEL_SIGMA = 0.08
+PINNED_SIGMA = 0.15
+PINNED_Z = 3.0
+JACKKNIFE_FOLDS = 8
+# Rounds of the indirect-light fit (each moves rho^ and solves the albedo again), and the range
+# rho^ is kept in.
+INDIRECT_ROUNDS = 4
+RHO_MEAN_RANGE = (0.05, 0.9)
+
+
+def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
+    """Exitance factors by ``opt.exitance`` (then per-leaf albedo rounds; the basis is solved
+    with them):
+
+    * "user" (default): the lights' powers and colours are what the user set: their ratios are
+      kept and only the common scale is fitted (with the reflectances); a lamp's ratio comes
+      from the photo only when the shadow-edge fit pins it down (PINNED_SIGMA, PINNED_Z);
+    * "photo": the shadow-edge fit's ratios, always;
+    * "nnls": non-negative least squares of the per-lamp basis against the photo;
+    * "equal": eq 4.2 (every lamp patch the same exitance).
 
     Only lamps that are on in the photo (``scene.lamp_intensity`` > 0) are fitted; a lamp that
     is off in it takes the geometric mean of their factors (the user's power units)."""
     scene = sol.scene
     k = scene.n_lamps
-    lamp_patch = scene.lamp >= 0
-    lum_emission = luminance(scene.emission)
-    area = scene.area_normal()[0]
+    on = scene.lamp_intensity > 0
+    eq_k = _equal_factors(scene, est, use_patch)
+    nnls_k = nnls_factors(sol, tm, photo, use_patch)
+
+    rho_first = sol.system.rho.copy()          # eq 4.1's, at the first guess of rho^
+
+    def rounds(scale, rho_mean):
+        # From eq 4.1's reflectances scaled to rho^ each time, so that the result depends on
+        # rho^ and not on the rounds that came before.
+        scale[~on] = np.exp(np.mean(np.log(np.maximum(scale[on], 1e-300))))
+        sol.system.rho = np.clip(rho_first * rho_mean / opt.rho_mean, 0.0, RHO_ESTIMATE_MAX)
+        albedo_rounds(sol, tm, photo, use_patch, rho_mean, opt.albedo_rounds, scale)
+        return scale
+
+    ratio = np.where(on, 1.0, np.nan)
+    sigma = np.where(on, 0.0 if on.sum() == 1 else np.inf, np.nan)
+    applied = np.zeros(k, bool)
+    rho_mean = opt.rho_mean
+    if opt.exitance == "nnls" and np.any(nnls_k > 0):
+        scale = rounds(nnls_k.copy(), rho_mean)
+    elif opt.exitance == "equal":
+        scale = rounds(eq_k.copy(), rho_mean)
+    else:
+        scale = rounds(np.ones(k), rho_mean)
+        if opt.fit_indirect and tm.n_texels:
+            rho_mean, scale = _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean,
+                                            rounds)
+        fit = edge_fit(sol, tm, photo, scale, texel_light, on, folds=JACKKNIFE_FOLDS,
+                       indirect=False)
+        if on.sum() >= 2 and tm.n_texels:
+            sig = np.hypot(fit.sigma_t, MODEL_SIGMA)
+            ratio[on], sigma[on] = fit.t, sig
+            if opt.exitance == "photo":
+                use = on.copy()
+            else:
+                pinned = (sig < PINNED_SIGMA) & (np.abs(np.log(fit.t)) > PINNED_Z * sig)
+                use = np.zeros(k, bool)
+                use[np.flatnonzero(on)[pinned]] = True
+            if use.any():
+                applied = use
+                scale[use] = scale[use] * ratio[use]
+                scale = rounds(scale, rho_mean)
+    return LampEstimate(scale, ratio, sigma, applied, eq_k, nnls_k, opt.exitance, rho_mean)
+
+
+def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
+    """rho^ such that the shadow-edge fit wants no more and no less indirect light (g = 1): a
+    secant search on log rho^ against log g, from the first guess, at most INDIRECT_ROUNDS
+    fits after the first.  log g falls about 2.7 times as fast as log rho^ rises (measured on
+    the family's tuning rooms), which sizes the first step.  Returns (rho^, scale)."""
+    lo, hi = np.log(RHO_MEAN_RANGE[0]), np.log(RHO_MEAN_RANGE[1])
+    x = np.log(rho_mean)
+    f = np.log(edge_fit(sol, tm, photo, scale, texel_light, on).g)
+    best = (abs(f), x, scale.copy())
+    slope = -2.7
+    for _ in range(INDIRECT_ROUNDS):
+        if abs(f) < 0.01:
+            break
+        x_new = float(np.clip(x - f / slope, max(lo, x - 0.7), min(hi, x + 0.7)))
+        if x_new == x:
+            break
+        scale = rounds(scale, float(np.exp(x_new)))
+        f_new = np.log(edge_fit(sol, tm, photo, scale, texel_light, on).g)
+        if f_new != f:
+            slope = float(np.clip((f_new - f) / (x_new - x), -20.0, -0.5))
+        x, f = x_new, f_new
+        if abs(f) < best[0]:
+            best = (abs(f), x, scale.copy())
+    if best[1] != x:                  # the last step was not the best: go back to it
+        scale = rounds(best[2], float(np.exp(best[1])))
+        x = best[1]
+    return float(np.exp(x)), scale
+
+
+def _equal_factors(scene, est, use_patch):
+    """Eq 4.2 factors (equal exitance on every lamp patch); 1 for lamps without patches."""
+    k = scene.n_lamps
     eq_k = np.ones(k)
-    if est is not None:
-        lamp_area = float(area[lamp_patch].sum())
-        e_eq = equal_lamp_exitance(est.scene_intensity, est.rho_mean,
-                                   float(area[use_patch].sum()), lamp_area)
-        for j in range(k):
-            sel = scene.lamp == j
+    lamp_patch = scene.lamp >= 0
+    area = scene.area_normal()[0]
+    if est is None or not lamp_patch.any():
+        return eq_k
+    e_eq = equal_lamp_exitance(est.scene_intensity, est.rho_mean, float(area[use_patch].sum()),
+                               float(area[lamp_patch].sum()))
+    lum_emission = luminance(scene.emission)
+    for j in range(k):
+        sel = scene.lamp == j
+        if sel.any():
             e_j = float((area[sel] * lum_emission[sel]).sum() / max(area[sel].sum(), 1e-300))
             eq_k[j] = e_eq / max(e_j, 1e-300)
-    nnls_k = nnls_factors(sol, tm, photo, use_patch)
-    on = scene.lamp_intensity > 0
-
-    def rounds(scale):
-        scale[~on] = np.exp(np.mean(np.log(np.maximum(scale[on], 1e-300))))
-        albedo_rounds(sol, tm, photo, use_patch, opt.rho_mean, opt.albedo_rounds, scale)
-
-    if opt.exitance == "nnls" and np.any(nnls_k > 0):
-        scale = nnls_k.copy()
-    elif opt.exitance == "equal" or on.sum() == 1:
-        scale = eq_k.copy()
-    else:   # "edges"
-        scale = (nnls_k if np.any(nnls_k > 0) else eq_k).copy()
-        rounds(scale)
-        for _ in range(2):
-            scale[on] = edge_fit(sol, tm, photo, scale, texel_light, on)
-            rounds(scale)
-        return scale, eq_k, nnls_k
-    rounds(scale)
-    return scale, eq_k, nnls_k
+    return eq_k
 
 
-def edge_fit(sol, tm, photo, scale, texel_light, on):
-    """Relative lamp exitances that make the reflectance photo / irradiance smoothest.
+@dataclass
+class EdgeFit:
+    """The shadow-edge fit: lamp ratios ``t`` (geometric mean 1 over the lamps on) and the
+    weight ``g`` of the indirect light against the direct, with the jackknife standard errors
+    of their logarithms (inf when there are too few surfaces to tell)."""
+    t: np.ndarray
+    g: float
+    sigma_t: np.ndarray
+    sigma_g: float
+
+
+def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> EdgeFit:
+    """Relative lamp exitances, and the weight of the indirect light, that make the reflectance
+    photo / irradiance smoothest.
 
     Reflectance does not know where shadows fall: with the right exitance ratios the photo's
-    shadow edges are explained by the irradiance and vanish from photo / H.  Minimises the
-    total variation of log(photo / sum_k t_k H_k) over neighbouring texels (robust to genuine
-    texture edges, which add a constant) over the k - 1 free ratios; irradiance per texel with
-    ray-cast direct light (``texel_light``, a TexelLight), the overall scale is kept.  Only the
-    lamps ``on`` in the photo take part; returns their factors.
-    """
-    from scipy.optimize import minimize
+    shadow edges are explained by the irradiance and vanish from photo / H.  The same holds for
+    the share of indirect light: in a shadow only the indirect light is left, so the depth of
+    the photo's shadows tells how strong it is against the direct light (the one thing a
+    photo says about the absolute level of the reflectances).  Minimises the total variation
+    of log(photo / sum_k t_k (D_k + g I_k)) over neighbouring texels (robust to genuine texture
+    edges, which add a constant) over the k - 1 free ratios and log g; D_k the direct
+    irradiance per texel (ray cast), I_k the indirect one (from the solution), at the factors
+    ``scale``.  Only the lamps ``on`` in the photo take part.  The jackknife runs over
+    ``folds`` groups of photographed surfaces."""
     k = int(np.sum(on))
-    if k < 2 or tm.n_texels == 0:
-        return scale[on]
-    Hocc_k, _ = texel_light.irradiance(sol, scale)
-    H = luminance(Hocc_k[on])                                         # (k, T)
+    n_free = (k - 1) + (1 if indirect else 0)
+    if n_free == 0 or tm.n_texels == 0:
+        return EdgeFit(np.ones(k), 1.0, np.zeros(k), 0.0)
+    (D, _), (I, _) = texel_light.parts(sol, scale)
+    D, I = luminance(D[on]), luminance(I[on])                          # (k, T)
     pairs = adjacent_texel_pairs(tm)
     t_lum = luminance(photo)
     ok = (t_lum[pairs[:, 0]] > 0) & (t_lum[pairs[:, 1]] > 0)
     pairs = pairs[ok]
     a, b = pairs[:, 0], pairs[:, 1]
     dlog_t = np.log(t_lum[a]) - np.log(t_lum[b])
-    Ha, Hb = H[:, a], H[:, b]
-    tiny = 1e-9 * max(float(H.sum(axis=0).max()), 1e-300)
+    Da, Db, Ia, Ib = D[:, a], D[:, b], I[:, a], I[:, b]
+    tiny = 1e-9 * max(float((D + I).sum(axis=0).max()), 1e-300)
 
-    def objective(x):
-        t = np.exp(np.r_[0.0, x])
-        ha = np.maximum(t @ Ha, tiny)
-        hb = np.maximum(t @ Hb, tiny)
-        return float(np.abs(dlog_t - np.log(ha) + np.log(hb)).sum())
+    def unpack(x):
+        lt = np.r_[0.0, x[:k - 1]]
+        return np.exp(lt - lt.mean()), (float(np.exp(x[k - 1])) if indirect else 1.0)
 
-    x0 = np.zeros(k - 1)
-    res = minimize(objective, x0, method="Nelder-Mead",
-                   options={"xatol": 1e-3, "fatol": 1e-6 * objective(x0), "maxiter": 400 * k})
-    t = np.exp(np.r_[0.0, res.x])
-    t *= k / t.sum()                      # keep the overall scale (fixed later by rho^)
-    return scale[on] * t
+    def solve(sel):
+        from scipy.optimize import minimize
+
+        def objective(x):
+            t, g = unpack(x)
+            ha = np.maximum(t @ (Da[:, sel] + g * Ia[:, sel]), tiny)
+            hb = np.maximum(t @ (Db[:, sel] + g * Ib[:, sel]), tiny)
+            return float(np.abs(dlog_t[sel] - np.log(ha) + np.log(hb)).sum())
+        x0 = np.zeros(n_free)
+        # An explicit simplex of +-0.1 in the logs: scipy's default around 0 is 2.5e-4 wide,
+        # below xatol, and would stop where it started.
+        simplex = np.vstack([x0, x0 + 0.1 * np.eye(n_free)])
+        res = minimize(objective, x0, method="Nelder-Mead",
+                       options={"xatol": 1e-3, "fatol": 1e-6 * max(objective(x0), 1e-300),
+                                "maxiter": 400 * (n_free + 1), "initial_simplex": simplex})
+        t, g = unpack(res.x)
+        return np.r_[np.log(t), np.log(g)]
+
+    full = solve(np.ones(len(a), bool))
+    t, g = np.exp(full[:k]), float(np.exp(full[k]))
+    if folds <= 1:
+        return EdgeFit(t, g, np.zeros(k), 0.0)
+    # Jackknife over groups of surfaces (patch groups, dealt into folds by texel count): a
+    # value that only some surfaces support is not pinned down.
+    group = np.asarray(sol.scene.group)[tm.patch[a]]
+    ids, counts = np.unique(group, return_counts=True)
+    if len(ids) < 3:
+        return EdgeFit(t, g, np.full(k, np.inf), np.inf)
+    fold_of = np.zeros(int(ids.max()) + 1, np.int64)
+    load = np.zeros(min(folds, len(ids)))
+    for gid, c in sorted(zip(ids, counts), key=lambda x: -x[1]):
+        f = int(np.argmin(load))
+        fold_of[gid] = f
+        load[f] += c
+    fold = fold_of[group]
+    n = len(load)
+    loo = np.array([solve(fold != f) for f in range(n)])
+    sigma = np.sqrt((n - 1) / n * ((loo - loo.mean(axis=0)) ** 2).sum(axis=0))
+    return EdgeFit(t, g, sigma[:k], float(sigma[k]))
 
 
 def nnls_factors(sol, tm, photo, use_patch, current=None):

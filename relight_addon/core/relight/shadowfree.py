@@ -49,8 +49,9 @@ from .transport import Transport, as_given
 class ShadowFreeOptions:
     mode: str = "texel"                 # "texel" | "element" | "none" (DRB97)
     preset: str = "medium"
-    exitance: str = "edges"             # "edges" | "nnls" | "equal" (eq 4.2)
-    rho_mean: float = 0.5               # rho^, the user's mean reflectance (eq 4.1)
+    exitance: str = "user"              # "user" | "photo" | "nnls" | "equal" (exitance.py)
+    rho_mean: float = 0.5               # rho^, the mean reflectance (eq 4.1): the first guess
+    fit_indirect: bool = True           # fit rho^ from the depth of the photo's shadows
     albedo_rounds: int = 3              # photo / irradiance re-estimation rounds
     refine: bool = True                 # texture-based refinement (fig 4.7)
     colour_threshold: float = 8.0       # LAB distance (eq 4.4) between neighbours
@@ -76,14 +77,17 @@ class ShadowFreeResult:
     texture: dict                 # image index -> (H, W, 3) float32 T_final (dilated)
     maps: dict                    # image index -> (k, H, W, 3) float32 M_k (dilated)
     coverage: dict                # image index -> (H, W) bool
-    exitance_scale: np.ndarray    # (k,) factor on each lamp's scene exitance (photo units)
-    exitance_equal: np.ndarray    # (k,) eq 4.2 factors, for the report
-    exitance_nnls: np.ndarray     # (k,) NNLS factors, for the report
+    lamps: object                 # LampEstimate: factors used, the photo's view, uncertainty
     solution: object              # the solution the maps come from
     first_solution: object | None = None
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     reference_info: dict | None = None   # frontier / reference codes per first-solution leaf
+
+    @property
+    def exitance_scale(self) -> np.ndarray:
+        """(k,) factor on each lamp's scene exitance (photo units per scene unit)."""
+        return self.lamps.scale
 
     def relit(self, intensities=None) -> dict:
         """T_final x sum_k I_k M_k per image (covered texels meaningful)."""
@@ -169,13 +173,14 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         sol = solve_radiosity(scene1, opt.preset, occluder=occluder, seed=opt.seed,
                               progress=stage.sub(0.05, 0.4))
     stage(0.4, "Lamp exitances and reflectances")
-    scale_k, eq_k, nnls_k = fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light)
+    lamps = fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light)
+    scale_k = lamps.scale
     misfit = photo_misfit(sol, tm, photo, use_patch)
 
     def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None):
         stage(1.0, None)
         stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
-        return ShadowFreeResult(opt, tm, texture, maps, coverage, scale_k, eq_k, nnls_k,
+        return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
                                 solution, first, stats, timings, reference_info)
 
     # 4. DRB97: the photo as it is, maps B_k / sum B.
@@ -205,7 +210,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         stage(0.45, "Texture-based refinement")
         refine_by_texture(sol, tm, photo, white, occluder, opt, scale_k)
         regather(sol, opt.seed + 1)
-        albedo_rounds(sol, tm, photo, use_patch, opt.rho_mean, opt.albedo_rounds, scale_k)
+        albedo_rounds(sol, tm, photo, use_patch, lamps.rho_mean, opt.albedo_rounds, scale_k)
 
     # First modification (eq 4.5, 4.6).
     stage(0.6, "Blocked irradiance and T_inter (eq 4.5, 4.6)")
@@ -235,13 +240,13 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     pm, _ = patch_means(tm, t_final, scene.n_patches)
     rho2 = scene.rho.copy()
     if len(est_ids):
-        rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], opt.rho_mean).rho
+        rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], lamps.rho_mean).rho
     sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=occluder,
                           seed=opt.seed + 2, progress=stage.sub(0.75, 0.9))
     if opt.refine:
         refine_by_texture(sol, tm, t_final, white, occluder, opt, scale_k, colour=False)
         regather(sol, opt.seed + 3)
-    albedo_rounds(sol, tm, t_final, use_patch, opt.rho_mean, opt.albedo_rounds, scale_k,
+    albedo_rounds(sol, tm, t_final, use_patch, lamps.rho_mean, opt.albedo_rounds, scale_k,
                   unoccluded=True)
     stage(0.92, "Display maps")
     Hocc_k, HU_k, _, _ = Transport(sol).irradiance(sol.basis)

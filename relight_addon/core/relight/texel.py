@@ -42,6 +42,12 @@ class TexelLight:
     def irradiance(self, sol, scale):
         """(H_occ,k, H_unocc,k) per texel (k, T, 3) with the exitance factors ``scale`` (k,):
         direct by ray casting, indirect interpolated from the solution's leaves."""
+        (O, U), (ind_occ, ind_un) = self.parts(sol, scale)
+        return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
+
+    def parts(self, sol, scale):
+        """((direct occluded, direct unoccluded), (indirect occluded, indirect unoccluded)) per
+        texel and lamp, each (k, T, 3): the two terms of :meth:`irradiance`."""
         Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
         elem = texel_elements(sol.hierarchy, self.tm)
         ind_occ = np.stack([vertex_interpolate(sol.hierarchy, o - d, self.tm, elem)
@@ -51,7 +57,7 @@ class TexelLight:
         U1, O1 = self.direct()
         s = np.asarray(scale, float)[None, :, None]
         U, O = np.moveaxis(U1 * s, 1, 0), np.moveaxis(O1 * s, 1, 0)      # (k, T, 3)
-        return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
+        return (O, U), (ind_occ, ind_un)
 
     def _cast(self):
         scene, tm = self.scene, self.tm
