@@ -372,6 +372,7 @@ def test_worker_job_and_display_maps():
     assert sol.basis.shape[0] == len(LAMPS)
     # display maps before quantisation: M_k >= 0, sum_k M_k == 1 wherever D is above its floor
     write = _write()
+    assert sol.scene.n_patches == data.n_patches and not np.any(job.result.stats["flipped"])
     maps = write.display_maps(data, sol)
     assert len(maps) == 7
     for coverage, m in maps.values():

@@ -37,6 +37,7 @@ from ..texture.colour import luminance
 from ..texture.mapping import patch_means, rasterize_patches, texel_elements, vertex_interpolate
 from .albedo import albedo_rounds, estimate_reflectance
 from .exitance import fit_lamps, photo_misfit
+from .orient import orient
 from .maps import (clipped_ratio, map_images, maps_from, ratio_maps, texels_of,
                    texture_images)
 from .reference import reference_correction
@@ -67,6 +68,7 @@ class ShadowFreeOptions:
     default_reference: object = "auto"  # "auto" | None | element id (first solution's ids)
     texel_rays: int = 32
     texel_samples: int = 2              # texel footprint sampled on an s x s grid
+    orient: bool = True                 # turn faces to their photographed side (orient.py)
     seed: int = 0
 
 
@@ -140,7 +142,13 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         tris = scene.occluder_triangles()
         occluder = make_occluder(tris) if len(tris) else None
 
-    stage(0.0, "Reading textures")
+    orientation = None
+    if opt.orient:
+        stage(0.0, "Orienting faces")
+        orientation = orient(scene, occluder, opt.seed)
+        scene = orientation.scene
+
+    stage(0.01, "Reading textures")
     shapes = [texels_of(im).shape[:2] for im in scene.images]
     image_of = scene.image if scene.image is not None else np.full(scene.n_patches, -1)
     uv = scene.uv if scene.uv is not None else np.zeros((scene.n_patches, 4, 2))
@@ -160,6 +168,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     if len(est_ids):
         est = estimate_reflectance(patch_mean[est_ids], area[est_ids], opt.rho_mean)
         rho_patch[est_ids] = est.rho
+    if orientation is not None and len(orientation.back_of):      # backs reflect as fronts
+        rho_patch[-len(orientation.back_of):] = rho_patch[orientation.back_of]
     scene1 = scene.with_rho(rho_patch)
 
     if reuse is not None and opt.mode != "element":
@@ -180,6 +190,9 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None):
         stage(1.0, None)
         stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
+        if orientation is not None:
+            stats.update(flipped=orientation.per_group("flipped"),
+                         two_sided=orientation.per_group("two_sided"))
         return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
                                 solution, first, stats, timings, reference_info)
 
@@ -241,6 +254,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     rho2 = scene.rho.copy()
     if len(est_ids):
         rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], lamps.rho_mean).rho
+    if orientation is not None and len(orientation.back_of):
+        rho2[-len(orientation.back_of):] = rho2[orientation.back_of]
     sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=occluder,
                           seed=opt.seed + 2, progress=stage.sub(0.75, 0.9))
     if opt.refine:

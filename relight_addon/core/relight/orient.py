@@ -1,0 +1,164 @@
+"""Which side of each face is the photographed one, and faces lit on both sides.
+
+The core's patches are one-sided: a face receives and reflects light on the side its normal
+points to.  Cycles shades both sides of a diffuse face in a render, so a model from another
+program can have faces turned any way and still look right; a room shell whose normals point
+out of the room would receive no light at all here.  Before the precompute every non-lamp face
+is looked at from both sides:
+
+* its lamps' direct light on each side (lamp_irradiance at five points of the face, with
+  visibility, every lamp at its scene intensity);
+* whether the camera (the scene's viewpoint) sees that side;
+* how open the side is: the fraction of cosine-distributed rays from it that leave the scene
+  without hitting anything (the outside of a room shell is open, its inside is not).
+
+A face whose back is lit (above DIM_LIGHT of a typical face's light) and at least twice as
+brightly as its front, or (with no direct light on either side) whose
+back the camera sees and whose front it does not, or (unlit, in a scene without a camera) whose
+front is open while its back is enclosed, is turned round.  A face lit on both sides (each at least TWO_SIDED_SHARE of the other,
+the photographed side being the front) also gets a back: a copy facing the other way that
+reflects light with the front's reflectance but has no texels of its own (the photo shows one
+side).  Faces lit only indirectly on their back (a table top's underside) stay one-sided.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.raycast import ray_offset
+from ..scene import SceneData, bilinear_point
+from ..texture.colour import luminance
+from .direct import lamp_irradiance
+
+TWO_SIDED_SHARE = 0.15
+DIM_LIGHT = 0.01
+OPEN_RAYS = 16
+LIGHT_RAYS = 8
+_PROBES = np.array([[0.5, 0.5], [0.15, 0.15], [0.85, 0.15], [0.85, 0.85], [0.15, 0.85]])
+
+
+@dataclass
+class Orientation:
+    """What ``orient`` did: ``scene`` (faces turned round, backs appended after the input's
+    patches), ``flipped`` (p,) bool over the input's patches, ``back_of`` (b,) the input patch
+    each appended back belongs to."""
+    scene: SceneData
+    flipped: np.ndarray
+    back_of: np.ndarray
+
+    def per_group(self, which):
+        """{group: count} of the input's flipped patches (``"flipped"``) or of the patches that
+        got a back (``"two_sided"``)."""
+        group = np.asarray(self.scene.group)
+        ids = np.flatnonzero(self.flipped) if which == "flipped" else self.back_of
+        g, c = np.unique(group[ids], return_counts=True)
+        return {int(a): int(b) for a, b in zip(g, c)}
+
+
+def _reverse(corners):
+    out = corners[:, [0, 3, 2, 1]]
+    tri = np.all(corners[:, 2] == corners[:, 3], axis=tuple(range(1, corners.ndim - 1)))
+    out[tri] = corners[tri][:, [0, 2, 1, 1]]
+    return out
+
+
+def _cosine_directions(normals, n, rng):
+    """(p, n, 3) cosine-distributed directions around each normal."""
+    a = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(a, normals)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    u, v = rng.random((len(normals), n)), rng.random((len(normals), n))
+    r, ph = np.sqrt(u), 2 * np.pi * v
+    z = np.sqrt(np.maximum(1 - u, 0.0))
+    return (r * np.cos(ph))[..., None] * t1[:, None] + (r * np.sin(ph))[..., None] * t2[:, None] \
+        + z[..., None] * normals[:, None]
+
+
+def side_evidence(scene: SceneData, occluder, patches, seed=0):
+    """Per patch of ``patches``: (lit (p, 2), camera (p, 2) bool, open (p, 2)) for its front
+    (column 0) and back (column 1)."""
+    rng = np.random.default_rng(seed)
+    c = scene.corners[patches]
+    _, normal = scene.area_normal()
+    n = normal[patches]
+    size = float(np.linalg.norm(np.ptp(scene.corners.reshape(-1, 3), axis=0)))
+    eps = ray_offset(size)
+    pts = bilinear_point(c[:, None], _PROBES[None, :, 0], _PROBES[None, :, 1])     # (p, 5, 3)
+    lit = np.zeros((len(patches), 2))
+    camera = np.zeros((len(patches), 2), bool)
+    openness = np.zeros((len(patches), 2))
+    centre = pts[:, 0]
+    for side, sign in ((0, 1.0), (1, -1.0)):
+        nn = sign * n
+        _, O = lamp_irradiance(scene, pts + eps * nn[:, None], nn, occluder, LIGHT_RAYS,
+                               seed + side)
+        lit[:, side] = luminance((O * scene.lamp_intensity[None, :, None]).sum(axis=1))
+        if scene.viewpoint is not None:
+            vp = np.asarray(scene.viewpoint, float)
+            facing = np.einsum("ij,ij->i", vp[None] - centre, nn) > 0
+            seen = facing.copy()
+            if occluder is not None and facing.any():
+                seen[facing] = ~occluder.segments_occluded(centre[facing] + eps * nn[facing],
+                                                           np.broadcast_to(vp, centre[facing].shape))
+            camera[:, side] = seen
+        if occluder is not None:
+            d = _cosine_directions(nn, OPEN_RAYS, rng)                          # (p, r, 3)
+            o = np.repeat(centre + eps * nn, OPEN_RAYS, axis=0)
+            hit = occluder.first_hit_distance(o, d.reshape(-1, 3), tmax=4 * size)
+            openness[:, side] = (~np.isfinite(hit)).reshape(-1, OPEN_RAYS).mean(axis=1)
+    return lit, camera, openness
+
+
+def orient(scene: SceneData, occluder, seed=0) -> Orientation:
+    """Turn faces to their photographed side and give faces lit on both sides a back (see
+    the module docstring)."""
+    faces = np.flatnonzero(scene.lamp < 0)
+    p = scene.n_patches
+    if len(faces) == 0:
+        return Orientation(scene, np.zeros(p, bool), np.zeros(0, np.int64))
+    lit, camera, openness = side_evidence(scene, occluder, faces, seed)
+    peak = lit.max(axis=1)
+    # direct light below DIM_LIGHT of a typical lit face's is noise, not a lit side
+    floor = DIM_LIGHT * float(np.percentile(peak, 90)) if len(peak) else 0.0
+    some = peak > floor
+    back_lit = some & (lit[:, 1] > 2.0 * lit[:, 0])
+    unlit = ~some
+    back_seen = unlit & camera[:, 1] & ~camera[:, 0]
+    # Without a camera, openness decides for unlit faces (with one it is not needed, and a face
+    # lying on another -- a box's bottom on the floor -- looks open from below).
+    back_enclosed = unlit & (scene.viewpoint is None) & (openness[:, 0] > 0.5) & \
+        (openness[:, 1] < 0.5)
+    flip = back_lit | back_seen | back_enclosed
+    both = some & (lit.min(axis=1) >= TWO_SIDED_SHARE * peak)
+    # a face lit on both sides keeps as its front the side the camera sees (the photographed
+    # one), else its brighter side
+    seen_back = camera[:, 1] & ~camera[:, 0]
+    seen_front = camera[:, 0] & ~camera[:, 1]
+    flip = np.where(both, seen_back | (~seen_front & back_lit), flip)
+    flipped = np.zeros(p, bool)
+    flipped[faces[flip]] = True
+    back_of = faces[both]
+    if not flipped.any() and len(back_of) == 0:
+        return Orientation(scene, flipped, back_of)
+    new = object.__new__(SceneData)
+    new.__dict__.update(scene.__dict__)
+    corners = scene.corners.copy()
+    corners[flipped] = _reverse(scene.corners[flipped])
+    uv = None
+    if scene.uv is not None:
+        uv = scene.uv.copy()
+        uv[flipped] = _reverse(scene.uv[flipped])
+    b = len(back_of)
+    new.corners = np.concatenate([corners, _reverse(corners[back_of])])
+    new.rho = np.concatenate([scene.rho, scene.rho[back_of]])
+    new.emission = np.concatenate([scene.emission, np.zeros((b, 3))])
+    new.lamp = np.concatenate([scene.lamp, np.full(b, -1, scene.lamp.dtype)])
+    new.occluder = np.concatenate([scene.occluder, np.zeros(b, bool)])   # the front blocks
+    new.group = np.concatenate([scene.group, scene.group[back_of]])
+    if uv is not None:
+        new.uv = np.concatenate([uv, _reverse(uv[back_of])])
+    if scene.image is not None:
+        new.image = np.concatenate([scene.image, np.full(b, -1, scene.image.dtype)])
+    return Orientation(new, flipped, back_of)

@@ -1,0 +1,63 @@
+"""Faces turned to their photographed side, and faces lit on both sides (core/relight/orient.py),
+against the same scene modelled the right way round."""
+import numpy as np
+
+from relight_addon.core.geometry.raycast import make_occluder
+from relight_addon.core.radiosity.precompute import solve_radiosity
+from relight_addon.core.relight.orient import orient
+from relight_addon.core.scene import SceneData, quads_from_boxes
+from scenes.testscenes import flip, subdivide_quads
+
+ROOM = flip(quads_from_boxes([2.0, 1.5, 1.25], [4.0, 3.0, 2.5]))        # inward faces
+
+
+def _room(outward=(), panel=False):
+    """A 4 x 3 x 2.5 room (faces split 2 x 2), a lamp under the ceiling at x = 1 and one at
+    x = 3, optionally a thin panel at x = 2 between them (a single quad facing -x)."""
+    faces = np.concatenate([subdivide_quads(f, 2) for f in ROOM])
+    turn = np.zeros(len(faces), bool)
+    turn[list(outward)] = True
+    faces[turn] = flip(faces[turn])
+    parts = [faces]
+    if panel:
+        parts.append(np.array([[[2.0, 2.5, 0.0], [2.0, 0.5, 0.0], [2.0, 0.5, 1.8], [2.0, 2.5, 1.8]]]))
+    lamps = np.array([[[x - 0.3, 1.2, 2.4], [x - 0.3, 1.8, 2.4], [x + 0.3, 1.8, 2.4],
+                       [x + 0.3, 1.2, 2.4]] for x in (1.0, 3.0)])
+    corners = np.concatenate(parts + [lamps])
+    n = len(corners)
+    emission = np.zeros((n, 3))
+    emission[-2:] = 20.0
+    lamp = np.full(n, -1)
+    lamp[-2:] = [0, 1]
+    occluder = np.ones(n, bool)
+    occluder[-2:] = False
+    return SceneData(corners, np.where(lamp[:, None] >= 0, 0.0, 0.6), emission, lamp,
+                     ["A", "B"], occluder=occluder, viewpoint=np.array([0.5, 0.5, 1.5]))
+
+
+def test_outward_shell_is_turned_round_and_solves_like_the_right_one():
+    wrong = list(range(0, 24, 3))                      # every third face of the shell
+    sc = _room(outward=wrong)
+    occ = make_occluder(sc.occluder_triangles())
+    o = orient(sc, occ)
+    assert sorted(np.flatnonzero(o.flipped).tolist()) == wrong
+    assert len(o.back_of) == 0
+    right = solve_radiosity(_room(), "draft", seed=1).patch_radiosity()
+    fixed = solve_radiosity(o.scene, "draft", seed=1).patch_radiosity()
+    np.testing.assert_allclose(fixed[:24], right[:24], rtol=0.03, atol=1e-3 * right.max())
+
+
+def test_a_panel_lit_from_both_sides_gets_a_back():
+    sc = _room(panel=True)
+    o = orient(sc, make_occluder(sc.occluder_triangles()))
+    panel = 24
+    assert not o.flipped[panel]                        # the camera (x = 0.5) sees its -x side
+    assert o.back_of.tolist() == [panel]
+    back = o.scene.n_patches - 1
+    _, nrm = o.scene.area_normal()
+    np.testing.assert_allclose(nrm[back], -nrm[panel])
+    assert not o.scene.occluder[back] and o.scene.image is None or o.scene.image[back] < 0
+    # the back reflects lamp B's light (at x = 3): its radiosity is far from zero
+    sol = solve_radiosity(o.scene, "draft", seed=2)
+    B = sol.patch_radiosity()
+    assert B[back].sum() > 0.3 * B[panel].sum()
