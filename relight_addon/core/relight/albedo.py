@@ -67,45 +67,64 @@ def estimate_reflectance(texel_mean, area, rho_mean=0.5, iterations=20,
 
 
 def albedo_rounds(sol, tm, values, use_patch, rho_mean, rounds, scale, unoccluded=False):
-    """rho per leaf = photo mean / irradiance, and the basis solved with it.
+    """rho per leaf = photo / irradiance, and the basis solved with it.
 
-    ``use_patch`` (p,) marks the patches whose leaves are estimated (textured, not lamps).  The
-    mean reflectance is held at ``rho_mean`` (rho^) and the exitance factors ``scale``
-    (updated in place) absorb the rest.  With ``unoccluded`` the irradiance ignores visibility
-    (T_final is lit without shadows).  Returns the leaf reflectances (L, 3)."""
+    A photographed leaf's radiosity is its photo (in photo units), so the light it sends to the
+    others is known without its reflectance: its irradiance is f D + I*, with D the lamps'
+    direct light at the current exitance factors and I* the light reflected by the other
+    leaves, photographed ones at their photo (others at their solved radiosity).  Its
+    reflectance is then photo / (f D + I*), and the one factor f on the lamps is the one that
+    holds the mean reflectance at ``rho_mean`` (rho^: the absolute level is not in the photo;
+    eq 4.1's assumption, or the shadow-depth fit of exitance.py).  ``scale`` (the exitance
+    factors) is multiplied by f in place.  A round of this needs no fixed-point iteration of
+    the reflectances (which drifts in colour in a strongly coloured room); the rounds only
+    update the radiosity of the leaves that are not photographed and of clipped ones.
+    ``use_patch`` (p,) marks the patches whose leaves are estimated (textured, not lamps).
+    With ``unoccluded`` the irradiance ignores visibility (T_final is lit without shadows).
+    Returns the leaf reflectances (L, 3)."""
     obs, counts = leaf_means(sol, tm, values)
     use = use_patch[sol.system.patch] & (counts > 0)
     a = sol.system.leaf_area
     rho = sol.system.rho.copy()
     solve_basis(sol, rho, scale)
+    intensities = sol.scene.lamp_intensity
     for _ in range(max(rounds, 1)):
-        H = Transport(sol).total(sol.radiosity(), sol.scene.lamp_intensity, unoccluded)
+        B = sol.radiosity()
+        B = np.where(use[:, None], obs, B)
+        tr = Transport(sol)
+        H = tr.total(B, intensities, unoccluded)
+        D = tr.direct(B, intensities, unoccluded)
+        I = np.maximum(H - D, 0.0)
+        f = _lamp_factor(obs[use], D[use], I[use], a[use], rho_mean)
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.where(H > 1e-12 * max(H.max(), 1e-300), obs / np.where(H > 0, H, 1.0), np.nan)
+            h = f * D + I
+            r = np.where(h > 1e-12 * max(h.max(), 1e-300), obs / np.where(h > 0, h, 1.0), np.nan)
         ok = use[:, None] & np.isfinite(r)
-        r = np.where(ok, r, rho)
-        c = clipped_mean_scale(luminance(r[use]), a[use], rho_mean)
-        r[use] /= c
-        scale *= c
-        rho = np.where(use[:, None], np.clip(r, 0.0, RHO_ESTIMATE_MAX), rho)
+        rho = np.where(ok, np.clip(r, 0.0, RHO_ESTIMATE_MAX), rho)
+        scale *= f
         solve_basis(sol, rho, scale)
     return rho
 
 
-def clipped_mean_scale(lum, area, target, iterations=100):
-    """c such that the area-weighted mean of min(lum / c, RHO_ESTIMATE_MAX) is ``target``
-    (eq 4.1's re-estimated mean: reflectances are clipped, so a few unlit leaves with huge
-    photo / irradiance ratios cannot drag the scale).  Bisection on log c; 1 when undefined."""
-    ok = np.isfinite(lum) & (lum > 0)
-    lum, area = lum[ok], area[ok]
-    if len(lum) == 0 or area.sum() <= 0 or not 0 < target < RHO_ESTIMATE_MAX:
+def _lamp_factor(obs, D, I, area, target, iterations=100):
+    """f such that the area-weighted mean luminance of min(obs / (f D + I), RHO_ESTIMATE_MAX)
+    is ``target``; bisection on log f (the mean falls as f grows); 1 when undefined."""
+    if len(obs) == 0 or area.sum() <= 0 or not 0 < target < RHO_ESTIMATE_MAX or not D.any():
         return 1.0
     w = area / area.sum()
-    med = float(np.median(lum))
-    lo, hi = np.log(med) - 30.0, np.log(med) + 30.0
+
+    def mean_rho(f):
+        h = f * D + I
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(h > 0, obs / np.where(h > 0, h, 1.0), RHO_ESTIMATE_MAX)
+        return float(w @ luminance(np.minimum(np.nan_to_num(r, nan=0.0), RHO_ESTIMATE_MAX)))
+
+    lo, hi = -30.0, 30.0
+    if mean_rho(np.exp(hi)) > target or mean_rho(np.exp(lo)) < target:
+        return 1.0                    # the indirect light alone explains the photo, or nothing
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
-        if float(w @ np.minimum(lum / np.exp(mid), RHO_ESTIMATE_MAX)) > target:
+        if mean_rho(np.exp(mid)) > target:
             lo = mid
         else:
             hi = mid

@@ -50,7 +50,17 @@ class Transport:
         """Leaf irradiance (L, 3) of a leaf radiosity (L, 3) lit by lamps at ``intensities``."""
         system, light = (self.unocc, self.light_unocc) if unoccluded else \
             (self.occ, self.light_occ)
-        H = system.gather(radiosity)
+        return self._with_lights(system.gather(radiosity), light, intensities)
+
+    def direct(self, radiosity, intensities, unoccluded=False):
+        """The part of :meth:`total` that comes straight from the lamps (lamp patches at their
+        radiosity, and the lights)."""
+        system, light = (self.dir_unocc, self.light_unocc) if unoccluded else \
+            (self.dir_occ, self.light_occ)
+        return self._with_lights(system.gather(radiosity), light, intensities)
+
+    @staticmethod
+    def _with_lights(H, light, intensities):
         if not np.isscalar(light):
             H = H + np.tensordot(np.asarray(intensities, float), light, axes=1)
         return H
