@@ -197,7 +197,11 @@ class _PrecomputeRunner(RelightOperator):
         _, write, _ = _modules()
         from ..relight_addon.core.scene import scene_fingerprint
         scene = context.scene
+        from ..relight_addon.core.relight.diagnose import diagnose
         summary = write.write_results(context, data, read_report, solution)
+        for sentence in diagnose(solution, solution.photographed,
+                                 lambda g: read_report.groups[g][0]):
+            read_report.warn(sentence)
         warnings = list(read_report.warnings)          # write_results appended its own
         store_status(scene, solution, time.perf_counter() - self._t0, correction,
                      remember(scene, solution), warnings, scene_fingerprint(data),

@@ -132,15 +132,26 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
                  geometry=""):
     """Write what the panel shows: counts, time, model misfit, lamps and their exitances, the
     read and write warnings, and the scene fingerprint that Update compares."""
+    import math
     stats = result.stats
     scale = [float(x) for x in result.exitance_scale]
     mean = sum(scale) / len(scale) if scale and sum(scale) > 0 else 1.0
+    est = result.lamps
+
+    def finite(x, default):
+        return float(x) if math.isfinite(x) else default
     scene[STATUS] = {
         "preset": result.options.preset, "correction": correction, "run": run,
         "elements": int(stats.get("elements", 0)), "links": int(stats.get("links", 0)),
         "seconds": float(seconds), "misfit": float(stats.get("photo_misfit", float("nan"))),
         "lamps": list(result.solution.scene.lamp_names),
         "exitance_scale": scale, "relative_exitance": [s / mean for s in scale],
+        # the photo's view of each lamp against its set power (geometric mean 1 over the lamps
+        # on in the photo; -1 where the photo cannot tell), its uncertainty, whether it is used
+        "photo_ratio": [finite(x, -1.0) for x in est.photo_ratio],
+        "photo_sigma": [finite(x, -1.0) for x in est.uncertainty],
+        "photo_used": [bool(x) for x in est.applied],
+        "rho_mean": finite(est.rho_mean, -1.0),
         "warnings": [str(w) for w in warnings],
         "fingerprint": fingerprint, "geometry": geometry,
     }

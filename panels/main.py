@@ -35,13 +35,25 @@ def status_lines(scene):
               'TIME')]
     if math.isfinite(st.get("misfit", float("nan"))):
         lines.append((f"Model vs photo: {100 * st['misfit']:.1f} % RMS", 'INFO'))
-    for name, rel in zip(st["lamps"], st["relative_exitance"]):
+    if st.get("rho_mean", -1) > 0:
+        lines.append((f"Mean reflectance (from the shadows' depth): {st['rho_mean']:.2f}", 'INFO'))
+    n = len(st["lamps"])
+    for j, name in enumerate(st["lamps"]):
         obj = bpy.data.objects.get(name)
         now = ""
         if obj is not None and obj.type == "LIGHT" and obj.data.get("relight_power0"):
-            now = f", now {obj.data.energy / obj.data['relight_power0']:.2f}x"
-        lines.append((f"{name}: photo {rel:.2f}x its set power (lamps' mean = 1){now}",
-                      'LIGHT_AREA'))
+            now = f"; now at {obj.data.energy / obj.data['relight_power0']:.2f}x"
+        ratio = st.get("photo_ratio", [-1] * n)[j]
+        sigma = st.get("photo_sigma", [-1] * n)[j]
+        used = st.get("photo_used", [False] * n)[j]
+        if n == 1:
+            view = "set power used (one lamp: the photo fixes only the overall level)"
+        elif ratio <= 0 or sigma < 0 or not math.isfinite(sigma):
+            view = "set power used (the photo cannot tell)"
+        else:
+            view = (f"photo says {ratio:.2f}x +- {100 * sigma:.0f} % of its set power, relative "
+                    f"to the other lamps; {'photo used' if used else 'set power used'}")
+        lines.append((f"{name}: {view}{now}", 'LIGHT_AREA'))
     return lines
 
 

@@ -456,7 +456,11 @@ def test_status_for_the_panel(fresh):
     lines = [t for t, _ in panel.status_lines(bpy.context.scene)]
     assert any("elements" in t for t in lines)
     assert sum(t.startswith(("LampA", "LampB")) for t in lines) == 2
-    assert any("now 1.00x" in t for t in lines), lines
+    assert any("now at 1.00x" in t for t in lines), lines
+    # each lamp: the photo's view against its set power, with an uncertainty, and what is used
+    assert all(("photo says" in t or "cannot tell" in t) and "used" in t
+               for t in lines if t.startswith("Lamp")), lines
+    assert len(st["photo_ratio"]) == len(st["photo_sigma"]) == len(LAMPS)
 
 
 def test_match_lamp_powers_keeps_the_relit_look(fresh):

@@ -300,3 +300,23 @@ def test_lamps_all_at_zero_power_is_a_clear_error():
     sc.emission[:] = 0.0
     with pytest.raises(SceneError, match="zero power"):
         shadow_free(sc, ShadowFreeOptions(mode="texel", preset="draft"))
+
+
+def test_a_lamp_set_four_times_too_weak_is_named(office):
+    """Lamp B's power set to a quarter of the truth: the photo's estimate says so (about 4 x
+    relative to lamp A, i.e. a ratio near 16 between the two halves of the geometric mean), it
+    is pinned down and used, and the diagnostics name the lamp."""
+    import copy
+
+    from relight_addon.core.relight.diagnose import diagnose
+    sc = copy.copy(office.scene)
+    sc.emission = office.scene.emission.copy()
+    sc.emission[sc.lamp == 1] *= 0.25
+    res = shadow_free(sc, ShadowFreeOptions(mode="texel", preset="medium"))
+    t = res.lamps.photo_ratio
+    assert abs((t[1] / t[0]) / 4.0 - 1) < 0.15, res.lamps
+    assert res.lamps.applied.all()
+    s = res.exitance_scale
+    assert abs((s[1] / s[0]) / 4.0 - 1) < 0.15
+    words = diagnose(res, res.photographed)
+    assert any("'Lamp B'" in w and "suggests" in w and "used" in w for w in words), words

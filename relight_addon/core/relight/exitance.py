@@ -236,6 +236,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     tiny = 1e-9 * max(float((D + I).sum(axis=0).max()), 1e-300)
 
     def unpack(x):
+        x = np.clip(x, -20.0, 20.0)          # a lamp the photo does not see drifts away
         lt = np.r_[0.0, x[:k - 1]]
         return np.exp(lt - lt.mean()), (float(np.exp(x[k - 1])) if indirect else 1.0)
 

@@ -85,6 +85,7 @@ class ShadowFreeResult:
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     reference_info: dict | None = None   # frontier / reference codes per first-solution leaf
+    photographed: np.ndarray | None = None   # (p,) patches whose reflectance the photo gives
 
     @property
     def exitance_scale(self) -> np.ndarray:
@@ -194,7 +195,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
             stats.update(flipped=orientation.per_group("flipped"),
                          two_sided=orientation.per_group("two_sided"))
         return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
-                                solution, first, stats, timings, reference_info)
+                                solution, first, stats, timings, reference_info, use_patch)
 
     # 4. DRB97: the photo as it is, maps B_k / sum B.
     if opt.mode == "none":

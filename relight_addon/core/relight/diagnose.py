@@ -1,0 +1,135 @@
+"""When the model cannot explain the photo, say so, and name the lamp or surface.
+
+The precompute always gives an answer; these checks tell the user when it should not be
+trusted, instead of a bare misfit number:
+
+* a photographed surface brighter than its lamps can explain (its reflectance clipped at the
+  estimate's ceiling on more than CLIPPED_SHARE of it): a lamp missing from the scene, a lamp
+  set too weak, an overexposed photo;
+* a lamp the photo sees very differently from its set power (the shadow-edge fit's ratio
+  outside [1 / OFF_FACTOR, OFF_FACTOR] while its uncertainty is below half of that): the user
+  should check it (the message says whether the photo's estimate was used);
+* a lamp whose map is zero on every photographed texel (inside or behind geometry);
+* a lamp closer to a surface than TOUCHING (metres) or than its own radius: the light right
+  next to it is not resolved.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..texture.colour import luminance
+from .albedo import RHO_ESTIMATE_MAX
+
+CLIPPED_SHARE = 0.05
+OFF_FACTOR = 2.0
+TOUCHING = 0.01
+
+
+def clipped_surfaces(sol, use_patch, group_names):
+    """[(name, share)] of the photographed groups whose reflectance hit the ceiling on more
+    than CLIPPED_SHARE of their area."""
+    patch = sol.system.patch
+    use = use_patch[patch]
+    if not use.any():
+        return []
+    a = sol.system.leaf_area
+    clipped = (sol.system.rho >= RHO_ESTIMATE_MAX - 1e-9).any(axis=1) & use
+    group = np.asarray(sol.scene.group)[patch]
+    out = []
+    for g in np.unique(group[use]):
+        sel = use & (group == g)
+        share = float(a[sel & clipped].sum() / a[sel].sum())
+        if share > CLIPPED_SHARE:
+            out.append((group_names(int(g)), share))
+    return out
+
+
+def _point_triangle_distance(p, tris):
+    """Distance from point p (3,) to each triangle (t, 3, 3): to its plane when p projects
+    inside it, else to its nearest edge."""
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ab, ac = b - a, c - a
+    n = np.cross(ab, ac)
+    nn = np.maximum((n * n).sum(1), 1e-300)
+    ap = p - a
+    h = (ap * n).sum(1) / nn
+    q = p - h[:, None] * n                                    # p projected on the plane
+    aq = q - a
+    d00, d01, d11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
+    d20, d21 = (aq * ab).sum(1), (aq * ac).sum(1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    inside = (v >= 0) & (w >= 0) & (v + w <= 1)
+
+    def to_segment(x, y):
+        t = np.clip(((p - x) * (y - x)).sum(1) / np.maximum(((y - x) ** 2).sum(1), 1e-300), 0, 1)
+        return np.linalg.norm(x + (y - x) * t[:, None] - p, axis=1)
+
+    edge = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))
+    return np.where(inside, np.abs(h) * np.sqrt(nn), edge)
+
+
+def lamp_clearance(scene, lamp):
+    """Distance (m) from lamp ``lamp`` (its patches' corners and centres, or its light's
+    centre, minus the light's radius) to the nearest occluding surface."""
+    tris = scene.occluder_triangles()
+    if len(tris) == 0:
+        return np.inf
+    pts = []
+    sel = scene.lamp == lamp
+    if sel.any():
+        c = scene.corners[sel]
+        pts += list(c.reshape(-1, 3)) + list(c.mean(axis=1))
+    radius = 0.0
+    lights = scene.lights
+    for i in np.flatnonzero(lights.lamp == lamp):
+        if lights.kind[i] == 2:                                  # a sun is outside
+            continue
+        pts.append(lights.position[i])
+        radius = max(radius, float(lights.radius[i]))
+    if not pts:
+        return np.inf
+    return min(float(_point_triangle_distance(np.asarray(p, float), tris).min()) for p in pts) \
+        - radius
+
+
+def diagnose(result, use_patch, group_names=str) -> list:
+    """Sentences for the user (see the module docstring); ``group_names(g)`` names a patch
+    group (an object / material)."""
+    sol = result.solution
+    scene = sol.scene
+    names = scene.lamp_names
+    out = []
+    for name, share in clipped_surfaces(sol, use_patch, group_names):
+        out.append(f"'{name}' is brighter in the photo than its lamps can explain on "
+                   f"{100 * share:.0f} % of it (a lamp missing from the scene or set too weak, "
+                   "or an overexposed photo): its relit light there is too dark")
+    est = result.lamps
+    seen = np.flatnonzero(np.isfinite(est.photo_ratio) & np.isfinite(est.uncertainty))
+    log_t = np.log(np.maximum(est.photo_ratio[seen], 1e-300))
+    for j, k in enumerate(seen):
+        others = np.delete(log_t, j)
+        if len(others) == 0:
+            continue
+        r = float(np.exp(log_t[j] - others.mean()))        # against the others' mean
+        s = est.uncertainty[k]
+        if r > OFF_FACTOR and s < 0.5 * np.log(OFF_FACTOR) or \
+                (len(seen) > 2 and r < 1 / OFF_FACTOR and s < 0.5 * np.log(OFF_FACTOR)):
+            versus = f"'{names[seen[1 - j]]}'" if len(seen) == 2 else "the other lamps"
+            used = ("the photo's estimate is used" if est.applied[k]
+                    else "the set power is kept")
+            out.append(f"The photo suggests lamp '{names[k]}' at {r:.2f} x its set power "
+                       f"relative to {versus} (+- {100 * s:.0f} %): check its power; {used}")
+    for k in range(len(names)):
+        peak = max((float(luminance(m[k]).max()) for m in result.maps.values()), default=0.0)
+        if peak <= 1e-9:
+            out.append(f"Lamp '{names[k]}' lights none of the photographed surfaces (is it "
+                       "inside or behind something?): switching it on will change nothing")
+    for k in range(len(names)):
+        gap = lamp_clearance(scene, k)
+        if gap < TOUCHING:
+            where = "inside or touching a surface" if gap <= 0 else f"{1000 * gap:.0f} mm from a surface"
+            out.append(f"Lamp '{names[k]}' is {where}: the light right next to it is not "
+                       "resolved (move it away a little, or make it smaller)")
+    return out
