@@ -1,0 +1,90 @@
+"""Relighting holds on rooms the pipeline was not tuned on (issue 9): the small test rooms of the
+family (scenes/family.py, 32 texels per surface, Cycles bakes in tests/data/family/), read as a
+user hands them to the add-on and scored against their Cycles truth (scenes/family_eval.py).
+
+Room 20: unequal lamps (3:1), a wall disk 0.3 m from the east wall, a table.  Room 21: a pendant
+point lamp and a spot on the west wall.  Room 22: a warm square and a cool emissive panel (1:2).
+Bounds are the benchmark's targets (benchmarks/results/family.md), looser where the issue says
+so: lamp off <= 2.0 CIEDE2000 on the mean over the rooms, overall and in the switched-off
+lamp's former shadow, <= 3.0 on every target, in the former shadow at most half the global
+exposure scale's error; exitance ratios within 5 % with exact powers.
+"""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free  # noqa: E402
+from scenes import family as fam  # noqa: E402
+from scenes import family_eval as fe  # noqa: E402
+from scenes.addon import register_repo_addon  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def scored():
+    register_repo_addon()
+    out = {}
+    for index in fam.TEST_ROOMS:
+        room = fe.photographed_room(index, "exact")
+        res = shadow_free(room.data, ShadowFreeOptions(preset="medium"))
+        out[index] = (room, res, fe.score(room, res))
+    return out
+
+
+def _off_targets(sc):
+    return {k: v for k, v in sc["targets"].items() if k.endswith(" off") or k.startswith("only")}
+
+
+def test_the_test_rooms_cover_what_the_issue_asks():
+    types = {lp.type for i in fam.TEST_ROOMS for lp in fam.room_spec(i).lamps}
+    assert {"POINT", "SPOT"} <= types
+    powers = [sorted(lp.power for lp in fam.room_spec(20).lamps)]
+    assert powers[0][1] / powers[0][0] >= 2.5                          # unequal lamps
+    assert any(abs(lp.wall_distance - 0.3) < 0.05 for lp in fam.room_spec(20).lamps)
+
+
+def test_lamp_off_against_the_truth(scored):
+    means, shadows = [], []
+    for index, (room, res, sc) in scored.items():
+        for label, row in _off_targets(sc).items():
+            relit, scale = row["relit"], row["scale"]
+            assert relit["all"][0] <= 3.0, (index, label, row)
+            means.append(relit["all"][0])
+            if relit["shadow_texels"] >= 20:
+                assert relit["shadow"][0] <= 3.0, (index, label, row)
+                assert relit["shadow"][0] <= 0.5 * scale["shadow"][0], (index, label, row)
+                shadows.append(relit["shadow"][0])
+    assert np.mean(means) <= 2.0, means
+    assert shadows and np.mean(shadows) <= 2.0, shadows
+
+
+def test_doubled_lamps_against_the_truth(scored):
+    for index, (room, res, sc) in scored.items():
+        for label, row in sc["targets"].items():
+            if label.endswith("x2"):
+                assert row["relit"]["all"][0] <= 2.0, (index, label, row)
+
+
+def test_exitance_ratios_with_exact_powers(scored):
+    for index, (room, res, sc) in scored.items():
+        assert sc["ratio_error"] <= 0.05, (index, sc["ratio_error"], res.lamps)
+
+
+def test_estimated_reflectances_match_the_true_albedo(scored):
+    """The reflectance the precompute finds per photographed surface, against the albedo the
+    room was built with: within 15 % per channel on the room's shell, 25 % on furniture (small,
+    partly hidden faces) -- the shadow-depth fit of rho^ included."""
+    for index, (room, res, sc) in scored.items():
+        sol = res.solution
+        patch = sol.system.patch
+        for s in room.spec.surfaces:
+            groups = [g for g, (label, _) in enumerate(room.report.groups) if label == s.name]
+            sel = np.isin(np.asarray(sol.scene.group)[patch], groups) & res.photographed[patch]
+            if not sel.any():
+                continue
+            a = sol.system.leaf_area[sel]
+            est = (sol.system.rho[sel] * a[:, None]).sum(0) / a.sum()
+            true = s.albedo[fam.coverage(s)].mean(axis=0)
+            shell = s.name in ("Floor", "Ceiling") or s.name.startswith("Wall")
+            np.testing.assert_allclose(est, true, rtol=0.15 if shell else 0.25,
+                                       err_msg=f"room {index} {s.name}")
