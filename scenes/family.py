@@ -31,7 +31,9 @@ a white plane 1 m below 3.1x as much as a 100 W, 1 m^2 area light), so ``Lamp.po
 pi * S * area for an emissive mesh.  ``Lamp.weight`` is the lamp's relative strength in its
 room (1-4): power = the type's base power x weight, so weight ratios are the "unequal power"
 ratios of the issue, comparable across lamp types (bases: area 55 W, point 140 W, spot 260 W,
-sun 3.5 W/m^2, emissive 55 W per side).
+emissive 55 W per side).  The sun is the exception: its strength is 3.5 W/m^2 x weight and
+what enters depends on the window: room 3's sun (weight 1, ~4 W through a 1.7 m^2 window) is a
+faint patch next to an 82 W lamp, rooms 9 and 13 (weights 8 and 5) have bright sun patches.
 
 Faces the other way (room 18, "from another program"): in ``build_room(spec, "file")`` the
 quads with ``Surface.flipped`` are built reversed (room shell normals pointing outward, some
@@ -660,7 +662,7 @@ def _seeded(index, texel=None):
         r.place("Box 2", "box", 0.5, 0.4, 0.45, "stripes")
         r.place("Table", "table", 1.2, 0.7, 0.72, "wood")
         w = _weights(rng, 2, 2.0)
-        r.sun((0.7, -0.25, -0.55), w[0])
+        r.sun((0.7, -0.25, -0.55), 8.0)       # a bright sun patch
         r.ceiling_area("RECTANGLE", (4.6, 1.2), 1.2, 0.4, w[1], "warm white")
         return r.spec("sun through a west window and a warm ceiling strip, boxes",
                       camera=((5.7, 3.7, 1.6), (0.5, 1.0, 0.6)))
@@ -703,7 +705,7 @@ def _seeded(index, texel=None):
         r.place("Table", "table", 1.5, 0.9, 0.74, "wood")
         r.place("Box 1", "box", 0.6, 0.5, 0.5, "noise")
         w = _weights(rng, 3, 3.5)
-        r.sun((-0.3, -0.7, -0.65), w[0])
+        r.sun((-0.3, -0.7, -0.65), 5.0)
         r.spot((1.0, 1.0, 2.9), (0.0, 3.0, 1.0), 45, 0.3, 0.06, w[1], "warm white")
         r.mesh_panel((4.0, 1.4, 2.99), 1.0, 0.3, w[2], "cool white")
         return r.spec("held out: sun through a north window, spot, emissive strip, dark floor",
@@ -961,7 +963,7 @@ def lamp_polygon(lamp: Lamp, k: int = 48) -> np.ndarray:
 
 def direct_bake(spec: RoomSpec, lamp: Lamp, surface: Surface) -> np.ndarray:
     """UNOCCLUDED direct light of ``lamp`` on ``surface`` in bake units (albedo x E / pi, colour
-    included), (H, W, 3); None for the sun (the window shades it).  Units as Blender 5.0 / Cycles
+    included), (H, W, 3); the sun's only through the window hole (strength x cos).  Units as Blender 5.0 / Cycles
     (checked against the bakes in tests/test_family_data.py): area lights (Normalize) exitance
     P / A; point and spot lights intensity P / (4 pi) W/sr (spot: inside the cone, smoothstep
     blend); emissive meshes exitance pi x Strength per emitting side."""
@@ -970,8 +972,25 @@ def direct_bake(spec: RoomSpec, lamp: Lamp, surface: Surface) -> np.ndarray:
     pts, nrm = P[m], N[m]
     E = np.zeros(len(pts))
     if lamp.type == "SUN":
-        return None
-    if lamp.type == "AREA":
+        # through the window hole only (the rest of the shell is closed); no other occluder
+        if spec.window is None:
+            raise ValueError("a sun needs a window")
+        wall = spec.surface(spec.window["wall"])
+        u0, u1, v0, v1 = spec.window["uv"]
+        q = wall.quads[0]                     # the strip below the hole spans the wall's width
+        o = q[0] - 0 * q[1]
+        du = q[1] - q[0]
+        dv = (wall.quads[1][3] - wall.quads[0][0]) if len(wall.quads) > 1 else q[3] - q[0]
+        n = wall.normals[0]
+        to_sun = -lamp.direction
+        denom = to_sun @ n
+        t = ((o - pts) @ n) / (denom if abs(denom) > 1e-12 else np.inf)
+        hit = pts + t[:, None] * to_sun
+        a = ((hit - o) @ du) / (du @ du)
+        b = ((hit - o) @ dv) / (dv @ dv)
+        inside = (t > 0) & (a > u0) & (a < u1) & (b > v0) & (b < v1) & (denom < 0)
+        E = np.where(inside, lamp.power * np.clip(nrm @ to_sun, 0, None), 0.0)
+    elif lamp.type == "AREA":
         poly = lamp_polygon(lamp)
         area = np.pi * lamp.size * lamp.size_y / 4 if lamp.shape in ("DISK", "ELLIPSE") else lamp.size * lamp.size_y
         F = point_to_polygon(pts, nrm, np.broadcast_to(poly, (len(pts), *poly.shape)),
@@ -1163,11 +1182,13 @@ def _mesh_object(bpy, name, quads, uvs=None, flip=None):
     return obj
 
 
-def build_room(spec: RoomSpec, orientation: str = "visible") -> dict:
+def build_room(spec: RoomSpec, orientation: str = "visible", textures: dict | None = None) -> dict:
     """Create the room in the current, factory-empty scene.  orientation "visible": every quad
     faces its photographed side (what is baked); "file": quads with ``Surface.flipped`` are
-    reversed (room 18, what another program would export).  Returns {"objects", "lamps",
-    "albedo_images", "materials", "camera"}."""
+    reversed (room 18, what another program would export).  textures: {object: (H, W, 3)
+    linear} used as the images instead of the true albedo, e.g. ``load_bakes(i).photo`` for the
+    "photographed" model the add-on is given.  Returns {"objects", "lamps", "albedo_images",
+    "materials", "camera"}."""
     import bpy  # noqa: PLC0415
     from mathutils import Matrix, Vector  # noqa: PLC0415
 
@@ -1179,7 +1200,8 @@ def build_room(spec: RoomSpec, orientation: str = "visible") -> dict:
     for s in spec.surfaces:
         flip = s.flipped if (orientation == "file" and s.flipped is not None) else None
         obj = _mesh_object(bpy, s.name, s.quads, s.uvs, flip)
-        img = _new_image(bpy, f"{s.name} albedo", s.albedo)
+        img = _new_image(bpy, f"{s.name} albedo" if textures is None else f"{s.name} photo",
+                         s.albedo if textures is None else np.asarray(textures[s.name], np.float32))
         mat = _diffuse_material(bpy, f"{s.name} material", img)
         nt = mat.node_tree
         uvn = nt.nodes.new("ShaderNodeUVMap")
