@@ -12,10 +12,11 @@ is looked at from both sides:
 * how open the side is: the fraction of cosine-distributed rays from it that leave the scene
   without hitting anything (the outside of a room shell is open, its inside is not).
 
-A face whose back is lit (above DIM_LIGHT of a typical face's light) and at least twice as
-brightly as its front, or (with no direct light on either side) whose
-back the camera sees and whose front it does not, or (unlit, in a scene without a camera) whose
-front is open while its back is enclosed, is turned round.  A face lit on both sides (each at least TWO_SIDED_SHARE of the other,
+The side the camera sees (and only that one) is the photographed side.  A face the camera sees
+from neither side (or both) is turned round when its back is lit (above DIM_LIGHT of a typical
+face's light) at least twice as brightly as its front, or (unlit, in a scene without a camera)
+when its front is open while its back is enclosed.  Light on the outside of the room (an open
+side, e.g. a sun on the roof) does not count.  A face lit on both sides (each at least TWO_SIDED_SHARE of the other,
 the photographed side being the front) also gets a back: a copy facing the other way that
 reflects light with the front's reflectance but has no texels of its own (the photo shows one
 side).  Faces lit only indirectly on their back (a table top's underside) stay one-sided.
@@ -119,24 +120,24 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     if len(faces) == 0:
         return Orientation(scene, np.zeros(p, bool), np.zeros(0, np.int64))
     lit, camera, openness = side_evidence(scene, occluder, faces, seed)
+    # The outside of a room (rays from it leave the scene) is not a side anyone photographed,
+    # even where a sun lights it: its light does not count.
+    outside = openness > 0.5
+    lit = np.where(outside & ~outside[:, ::-1], 0.0, lit)
     peak = lit.max(axis=1)
     # direct light below DIM_LIGHT of a typical lit face's is noise, not a lit side
     floor = DIM_LIGHT * float(np.percentile(peak, 90)) if len(peak) else 0.0
     some = peak > floor
     back_lit = some & (lit[:, 1] > 2.0 * lit[:, 0])
-    unlit = ~some
-    back_seen = unlit & camera[:, 1] & ~camera[:, 0]
-    # Without a camera, openness decides for unlit faces (with one it is not needed, and a face
-    # lying on another -- a box's bottom on the floor -- looks open from below).
-    back_enclosed = unlit & (scene.viewpoint is None) & (openness[:, 0] > 0.5) & \
-        (openness[:, 1] < 0.5)
-    flip = back_lit | back_seen | back_enclosed
-    both = some & (lit.min(axis=1) >= TWO_SIDED_SHARE * peak)
-    # a face lit on both sides keeps as its front the side the camera sees (the photographed
-    # one), else its brighter side
     seen_back = camera[:, 1] & ~camera[:, 0]
     seen_front = camera[:, 0] & ~camera[:, 1]
-    flip = np.where(both, seen_back | (~seen_front & back_lit), flip)
+    unlit = ~some
+    # Without a camera, openness decides for unlit faces (with one it is not needed, and a face
+    # lying on another -- a box's bottom on the floor -- looks open from below).
+    back_enclosed = unlit & (scene.viewpoint is None) & outside[:, 0] & ~outside[:, 1]
+    # The side the camera sees is the photographed one; else the lit side; else the inside.
+    flip = np.where(seen_back | seen_front, seen_back, back_lit | back_enclosed)
+    both = some & (lit.min(axis=1) >= TWO_SIDED_SHARE * peak)
     flipped = np.zeros(p, bool)
     flipped[faces[flip]] = True
     back_of = faces[both]
