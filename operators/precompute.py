@@ -60,13 +60,26 @@ def reusable_solution(scene, preset, correction):
     return result.solution
 
 
-def read_for_precompute(context):
-    """Read the scene (relit materials are read through to the user's originals).
+def virtual_lights(scene):
+    """Names of the scene's lights that are not real lamps of its last precompute: lights added
+    since are virtual (not in the photo), and stay so until Clear."""
+    st = status(scene)
+    if not st:
+        return set()
+    real = set(st.get("lamps", ())) - set(st.get("virtual", ()))
+    return {o.name for o in scene.objects if o.type == "LIGHT"} - real
+
+
+def read_for_precompute(context, virtual=None):
+    """Read the scene (relit materials are read through to the user's originals; ``virtual``
+    lights, by default those added since the last precompute, are read off in the photo).
     Returns (scene_data, report, error message or None)."""
     read, write, _ = _modules()
     from ..relight_addon.core.scene import SceneError
+    if virtual is None:
+        virtual = virtual_lights(context.scene)
     try:
-        data, report = read.read_scene(context)
+        data, report = read.read_scene(context, virtual=virtual)
     except SceneError as ex:
         return None, None, str(ex)
     if report.errors:
@@ -142,6 +155,11 @@ class SolveJob:
             self.state = "failed"
 
 
+def virtual_indices(report):
+    """Lamp indices of the virtual lamps of a read (lights that are not in the photo)."""
+    return [k for k, src in enumerate(report.lamp_sources) if src.get("virtual")]
+
+
 def solve_running() -> bool:
     job = _ACTIVE["job"]
     return job is not None and job.state == "running"
@@ -203,9 +221,12 @@ class _PrecomputeRunner(RelightOperator):
                                  lambda g: read_report.groups[g][0]):
             read_report.warn(sentence)
         warnings = list(read_report.warnings)          # write_results appended its own
+        virtual = virtual_indices(read_report)
+        real = data.without_lamps(virtual)
         store_status(scene, solution, time.perf_counter() - self._t0, correction,
                      remember(scene, solution), warnings, scene_fingerprint(data),
-                     scene_fingerprint(data, textures=False))
+                     scene_fingerprint(real, textures=False), scene_fingerprint(real),
+                     [data.lamp_names[k] for k in virtual])
         settings = getattr(scene, "relight", None)
         if settings is not None:
             update_overlay(settings, context)
@@ -307,7 +328,7 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
         read = self._read(context, preset)
         if read is None:
             return {'CANCELLED'}
-        data, _ = read
+        data, report = read
         st = status(scene)
         reuse = None
         if st and write.has_relight_data(scene) and st.get("preset") == preset \
@@ -316,10 +337,41 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
                 self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
                                       "precompute)")
                 return {'FINISHED'}
-            if st.get("geometry") == scene_fingerprint(data, False):
+            virtual = virtual_indices(report)
+            real = data.without_lamps(virtual)
+            last = last_result(scene)
+            if last is not None and last.denominator is not None and \
+                    st.get("real") == scene_fingerprint(real):
+                return self._virtual_lamps_only(context, data, report, last, virtual, correction)
+            if st.get("geometry") == scene_fingerprint(real, False):
                 reuse = reusable_solution(scene, preset, correction)
         run = self._solve_modal if modal else self._solve_now
         return run(context, *read, preset, correction, reuse)
+
+    def _virtual_lamps_only(self, context, data, report, last, virtual, correction):
+        """Only virtual lamps were added, moved or changed: keep the real lamps' result and
+        compute the virtual lamps' maps on it (no new solve of the room)."""
+        import dataclasses
+
+        import numpy as np
+
+        from ..relight_addon.core.relight.virtual import add_lamps, keep_lamps
+        st = status(context.scene)
+        names = list(last.solution.scene.lamp_names)
+        base = keep_lamps(last, [names.index(n) for n in st.get("virtual", ()) if n in names])
+        lights = data.lights
+        rows = [np.flatnonzero(lights.lamp == k) for k in virtual]
+        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        order = {k: j for j, k in enumerate(virtual)}
+        sub = dataclasses.replace(lights, **{f.name: getattr(lights, f.name)[rows]
+                                             for f in dataclasses.fields(lights)})
+        sub.lamp = np.array([order[int(k)] for k in sub.lamp], np.int32)
+        try:
+            result = add_lamps(base, sub, [data.lamp_names[k] for k in virtual])
+        except Exception as ex:
+            self.report({'ERROR'}, f"Relight update failed: {user_message(ex)}")
+            return {'CANCELLED'}
+        return self._finish(context, data, report, result, correction)
 
 
 class RELIGHT_OT_restore_originals(RelightOperator, bpy.types.Operator):

@@ -123,13 +123,19 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
 
 
 def status(scene):
-    """The last precompute's status dict, or None."""
+    """The last precompute's status dict, or None (also for a copy of a scene, which carries
+    its original's status: it describes the original's lamps and result)."""
     st = scene.get(STATUS)
+    if st is None:
+        return None
+    from ..relight_addon.blender.write import scene_key
+    if scene_key(scene) is None:
+        return None
     return st.to_dict() if hasattr(st, "to_dict") else st
 
 
 def store_status(scene, result, seconds, correction, run, warnings, fingerprint="",
-                 geometry=""):
+                 geometry="", real="", virtual=()):
     """Write what the panel shows: counts, time, model misfit, lamps and their exitances, the
     read and write warnings, and the scene fingerprint that Update compares."""
     import math
@@ -154,6 +160,9 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
         "rho_mean": finite(est.rho_mean, -1.0),
         "warnings": [str(w) for w in warnings],
         "fingerprint": fingerprint, "geometry": geometry,
+        # the scene without its virtual lamps (what the real lamps' maps depend on), and the
+        # virtual lamps (lights added after the first precompute: not in the photo)
+        "real": real, "virtual": list(virtual),
     }
 
 

@@ -513,8 +513,13 @@ def reference_power(light) -> float:
     return best if best > 0 else 1.0
 
 
-def read_scene(context_or_scene, depsgraph=None, roles=None):
-    """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene."""
+def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
+    """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene.
+
+    ``virtual``: names of lights that are not in the photo (virtual lamps, added after the
+    precompute): they are read off in the photo (intensity 0) at their current power, and an
+    area light among them as a core Light rather than patches (so that it can be added to a
+    finished solution without new links)."""
     if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
         scene = context_or_scene.scene
         if depsgraph is None:
@@ -574,7 +579,9 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
             if not np.any(light_colour(light) > 0):
                 report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
                 continue
-            patches = light.type == "AREA" and float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
+            is_virtual = label in virtual
+            patches = light.type == "AREA" and not is_virtual and \
+                float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
             if patches:
                 local = _area_light_polygon(light)
                 if np.linalg.det(matrix[:3, :3]) < 0:
@@ -585,6 +592,9 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                 if not area > 0:
                     report.warn(f"Light '{label}' has zero area and is ignored")
                     continue
+            if is_virtual and power <= 0:
+                report.warn(f"Virtual lamp '{label}' has no power: it is ignored")
+                continue
             if power <= 0:
                 unit = "W/m^2" if light.type == "SUN" else "W"
                 report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
@@ -592,9 +602,10 @@ def read_scene(context_or_scene, depsgraph=None, roles=None):
                             "switches it on")
             k = len(lamp_names)
             lamp_names.append(label)
-            lamp_intensity.append(power / power_ref)
+            lamp_intensity.append(0.0 if is_virtual else power / power_ref)
             report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
-                                        "type": light.type, "power_photo": power,
+                                        "type": light.type, "virtual": is_virtual,
+                                        "power_photo": 0.0 if is_virtual else power,
                                         "power_ref": power_ref})
             report.lamps += 1
             if not patches:

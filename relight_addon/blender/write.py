@@ -413,10 +413,12 @@ def write_results(context, scene_data, report, solution) -> dict:
     key = scene_key(scene, create=True)
     clear_relight_data(scene)
 
-    # Lamps: light data and the power each map is computed at (P0 of the driver p / P0).
+    # Lamps, in the result's order (its maps' order): light data and the power each map is
+    # computed at (P0 of the driver p / P0).
     lamps = []
-    for j, name in enumerate(scene_data.lamp_names):
-        src = report.lamp_sources[j] if j < len(report.lamp_sources) else {}
+    sources = {src["name"]: src for src in report.lamp_sources}
+    for name in solution.solution.scene.lamp_names:
+        src = sources.get(name, {})
         obj = bpy.data.objects.get(src.get("object", name))
         if obj is not None and obj.type == "LIGHT":
             p0 = float(src.get("power_ref", obj.data.energy))

@@ -210,6 +210,28 @@ class SceneData:
         new.rho = np.clip(np.asarray(rho, float), 0.0, RHO_MAX)
         return new
 
+    def without_lamps(self, drop) -> "SceneData":
+        """A shallow copy without the lamps ``drop`` (indices) that are lights (core Lights,
+        not patches): the other lamps keep their order, renumbered."""
+        drop = set(int(k) for k in drop)
+        if any(int(k) in drop for k in np.unique(self.lamp[self.lamp >= 0])):
+            raise ValueError("only lamps that are lights can be left out")
+        keep = [k for k in range(self.n_lamps) if k not in drop]
+        renumber = np.full(self.n_lamps, -1)
+        renumber[keep] = np.arange(len(keep))
+        new = object.__new__(SceneData)
+        new.__dict__.update(self.__dict__)
+        new.lamp_names = [self.lamp_names[k] for k in keep]
+        new.lamp_intensity = self.lamp_intensity[keep]
+        rows = np.flatnonzero(~np.isin(self.lights.lamp, list(drop)))
+        import dataclasses
+        lights = self.lights
+        new.lights = dataclasses.replace(
+            lights, **{f.name: getattr(lights, f.name)[rows] for f in dataclasses.fields(lights)})
+        new.lights.lamp = renumber[new.lights.lamp]
+        new.lamp = np.where(self.lamp >= 0, renumber[np.maximum(self.lamp, 0)], -1).astype(self.lamp.dtype)
+        return new
+
     # -- derived quantities ---------------------------------------------------------------
     @property
     def n_patches(self) -> int:

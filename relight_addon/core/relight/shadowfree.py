@@ -86,6 +86,10 @@ class ShadowFreeResult:
     timings: dict = field(default_factory=dict)
     reference_info: dict | None = None   # frontier / reference codes per first-solution leaf
     photographed: np.ndarray | None = None   # (p,) patches whose reflectance the photo gives
+    # texel mode: the irradiance the photo was lit by, per texel (T, 3), that every map divides
+    # by (virtual lamps added later divide by it too), and the occluder the run used
+    denominator: np.ndarray | None = None
+    occluder: object = None
 
     @property
     def exitance_scale(self) -> np.ndarray:
@@ -188,14 +192,16 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     scale_k = lamps.scale
     misfit = photo_misfit(sol, tm, photo, use_patch)
 
-    def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None):
+    def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None,
+               denominator=None):
         stage(1.0, None)
         stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
         if orientation is not None:
             stats.update(flipped=orientation.per_group("flipped"),
                          two_sided=orientation.per_group("two_sided"))
         return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
-                                solution, first, stats, timings, reference_info, use_patch)
+                                solution, first, stats, timings, reference_info, use_patch,
+                                denominator, occluder)
 
     # 4. DRB97: the photo as it is, maps B_k / sum B.
     if opt.mode == "none":
@@ -217,7 +223,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         maps = maps_from(Hocc_k, Hocc * factor)
         stage(0.95, "Writing maps")
         mp, cov = map_images(tm, maps)
-        return result(texture_images(tm, t_final, scene.images), mp, cov, sol)
+        return result(texture_images(tm, t_final, scene.images), mp, cov, sol,
+                      denominator=Hocc * factor)
 
     # 3. Per element (the seed's pipeline).
     if opt.refine:

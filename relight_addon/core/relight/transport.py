@@ -34,7 +34,8 @@ class Transport:
             self.light_unocc = sol.light_unocc * s[:, None, None]
 
     @staticmethod
-    def _per_lamp(system, basis):
+    def per_lamp(system, basis):
+        """Gather of a per-lamp leaf radiosity (k, L, 3) through ``system``: (k, L, 3)."""
         k, L, _ = basis.shape
         flat = np.moveaxis(basis, 0, 2).reshape(L, 3 * k)
         return np.moveaxis(system.gather(flat).reshape(L, 3, k), 2, 0)   # (k, L, 3)
@@ -42,9 +43,9 @@ class Transport:
     def irradiance(self, basis):
         """Per lamp (k, L, 3): occluded, unoccluded, direct occluded, direct unoccluded."""
         lo, lu = self.light_occ, self.light_unocc
-        return (self._per_lamp(self.occ, basis) + lo, self._per_lamp(self.unocc, basis) + lu,
-                self._per_lamp(self.dir_occ, basis) + lo,
-                self._per_lamp(self.dir_unocc, basis) + lu)
+        return (self.per_lamp(self.occ, basis) + lo, self.per_lamp(self.unocc, basis) + lu,
+                self.per_lamp(self.dir_occ, basis) + lo,
+                self.per_lamp(self.dir_unocc, basis) + lu)
 
     def total(self, radiosity, intensities, unoccluded=False):
         """Leaf irradiance (L, 3) of a leaf radiosity (L, 3) lit by lamps at ``intensities``."""

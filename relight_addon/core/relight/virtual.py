@@ -1,0 +1,123 @@
+"""Virtual lamps (seed 000 §4.4.1): lamps that are not in the photo, added to a finished precompute.
+
+Light transport is linear in the lamps, so a lamp added after the precompute only needs its own
+basis on the existing radiosity mesh and links, its own direct light per texel, and its map
+M_v = H_occ,v / D with D the irradiance the photo was lit by (kept by texel mode): the shadow-free
+texture, the other maps and the reflectances stay as they are.  The lamps are given as core
+``Lights`` (a Blender area light too, as an AREA light: no new patches, so no new links); its
+exitance factor is the real lamps' common factor (the user's power units are the real lamps').
+The new lamps' direct light on every leaf is reflected through the existing transport, so they
+light the room with its interreflections and are shadowed by its geometry.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+
+from ..lights import Lights
+from ..radiosity.precompute import lights_on_elements
+from ..texture.mapping import texel_elements, vertex_interpolate
+from .maps import map_images, maps_from
+from .texel import TexelLight
+from .transport import Transport
+
+
+def _with_lamps(scene, lights: Lights, names):
+    """A shallow copy of ``scene`` with the lamps ``names`` (lights indexed 0..) appended, off in
+    the photo (intensity 0)."""
+    k0 = scene.n_lamps
+    new = copy.copy(scene)
+    rows = dataclasses.replace(lights, lamp=lights.lamp + k0)
+    new.lamp_names = list(scene.lamp_names) + list(names)
+    new.lamp_intensity = np.concatenate([scene.lamp_intensity, np.zeros(len(names))])
+    new.lights = Lights.concat([scene.lights, rows])
+    return new, rows
+
+
+def _only_lights(scene, rows):
+    """``scene`` with no lamp patches and only the light ``rows``: what the new lamps light."""
+    new = copy.copy(scene)
+    new.lamp = np.full_like(scene.lamp, -1)
+    new.emission = np.zeros_like(scene.emission)
+    new.lights = rows
+    return new
+
+
+def add_lamps(result, lights: Lights, names, seed=0):
+    """A copy of ``result`` (a texel-mode ShadowFreeResult) with the lamps ``lights`` (core
+    Lights, ``lights.lamp`` indexing ``names``) added after its lamps: the solution gains their
+    bases, the maps one image layer per new lamp, the lamp estimate their factors (the real
+    lamps' geometric mean; no photo estimate: nan)."""
+    if result.denominator is None:
+        raise ValueError("virtual lamps are added to a per-texel result only")
+    m = len(names)
+    if m == 0:
+        return result
+    sol = result.solution
+    scene, rows = _with_lamps(sol.scene, lights, names)
+    k0 = sol.scene.n_lamps
+    q = sol.quality
+    size = sol.context.get("scale", 1.0)
+    occluder = result.occluder
+    # The new lamps' direct light on every leaf, then their bases on the existing system.
+    lit_scene = _only_lights(scene, rows)
+    occ, unocc = lights_on_elements(lit_scene, sol.hierarchy, sol.leaves, occluder,
+                                    q.quadrature, q.rays, seed, size)
+    occ, unocc = occ[k0:], unocc[k0:]
+    real = sol.emission_scale[sol.scene.lamp_intensity > 0]
+    s = float(np.exp(np.mean(np.log(np.maximum(real, 1e-300))))) if len(real) else 1.0
+    E = np.moveaxis(occ, 0, 2) * sol.system.rho[:, :, None] * s            # (L, 3, m)
+    basis, _ = sol.system.solve(E, q.solver, tol=q.tol)
+    new_sol = copy.copy(sol)
+    new_sol.scene = scene
+    new_sol.basis = np.concatenate([sol.basis, np.moveaxis(basis, 2, 0)])
+    L = len(sol.leaves)
+    old_occ = sol.light_occ if sol.light_occ is not None else np.zeros((k0, L, 3))
+    old_unocc = sol.light_unocc if sol.light_unocc is not None else np.zeros((k0, L, 3))
+    new_sol.light_occ = np.concatenate([old_occ, occ])
+    new_sol.light_unocc = np.concatenate([old_unocc, unocc])
+    new_sol.emission_scale = np.concatenate([sol.emission_scale, np.full(m, s)])
+    # Per texel: direct by ray casting (the new lamps only), indirect from the new bases.
+    tm = result.texel_map
+    opt = result.options
+    U1, O1 = TexelLight(lit_scene, tm, occluder, opt.texel_rays, opt.texel_samples,
+                        opt.seed + 101).direct()
+    tr = Transport(new_sol)
+    b_new = new_sol.basis[k0:]
+    indirect = tr.per_lamp(tr.occ, b_new) - tr.per_lamp(tr.dir_occ, b_new)  # (m, L, 3)
+    elem = texel_elements(sol.hierarchy, tm)
+    H_new = np.stack([vertex_interpolate(sol.hierarchy, x, tm, elem) for x in indirect])
+    H_new = np.maximum(np.moveaxis(O1[:, k0:] * s, 1, 0) + H_new, 0.0)    # (m, T, 3)
+    new_maps, _ = map_images(tm, maps_from(H_new, result.denominator))
+    maps = {i: np.concatenate([result.maps[i], new_maps[i]]) for i in result.maps}
+    est = result.lamps
+    lamps = dataclasses.replace(
+        est, scale=np.concatenate([est.scale, np.full(m, s)]),
+        photo_ratio=np.concatenate([est.photo_ratio, np.full(m, np.nan)]),
+        uncertainty=np.concatenate([est.uncertainty, np.full(m, np.nan)]),
+        applied=np.concatenate([est.applied, np.zeros(m, bool)]),
+        equal=np.concatenate([est.equal, np.ones(m)]), nnls=np.concatenate([est.nnls, np.zeros(m)]))
+    return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol)
+
+
+def keep_lamps(result, drop):
+    """A copy of ``result`` without the lamps ``drop`` (indices of lamps that are lights, e.g.
+    virtual lamps to be added again with :func:`add_lamps`)."""
+    sol = result.solution
+    drop = sorted(set(int(k) for k in drop))
+    if not drop:
+        return result
+    keep = np.array([k for k in range(sol.scene.n_lamps) if k not in drop])
+    new_sol = copy.copy(sol)
+    new_sol.scene = sol.scene.without_lamps(drop)
+    new_sol.basis = sol.basis[keep]
+    new_sol.emission_scale = sol.emission_scale[keep]
+    if sol.light_occ is not None:
+        new_sol.light_occ, new_sol.light_unocc = sol.light_occ[keep], sol.light_unocc[keep]
+    est = result.lamps
+    lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
+        "scale", "photo_ratio", "uncertainty", "applied", "equal", "nnls")})
+    return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
+                               lamps=lamps, solution=new_sol)
