@@ -700,3 +700,21 @@ def test_update_after_photo_edit_keeps_the_mesh():
                 for x in (px0, _pixels(img)))
     ratio = t_reused[:8].mean() / t_before[:8].mean()
     assert abs(ratio / (new / old) - 1) < 0.1, (ratio, new / old)
+
+
+def test_driver_follows_light_colour():
+    """Changing a lamp's colour changes its light channel by channel (C_k drivers), with simple
+    expressions; the other lamp is untouched."""
+    _addon()
+    build_scene()
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    mat = bpy.data.materials["Floor_mat.relight"]
+    node = mat.node_tree.nodes["C LampA"]
+    light = bpy.data.lights["LampA"]
+    light.color = (1.0, 0.5, 0.25)
+    bpy.context.view_layer.update()
+    assert [round(node.inputs[i].default_value, 6) for i in range(3)] == [1.0, 0.5, 0.25]
+    other = mat.node_tree.nodes["C LampB"]
+    assert [other.inputs[i].default_value for i in range(3)] == [1.0, 1.0, 1.0]
+    for fc in mat.node_tree.animation_data.drivers:
+        assert fc.driver.is_simple_expression and fc.driver.is_valid, fc.data_path

@@ -361,7 +361,7 @@ def test_reopened_file_keeps_relit_data_without_addon(relit, worker):
         assert v["packed"], name
     # drivers: simple expressions, valid, and they follow the keyframed power
     drivers = worker["drivers"][relit["relit_mat"]]
-    assert len(drivers) == len(LAMPS)
+    assert len(drivers) == 4 * len(LAMPS)           # power, and colour per channel
     for path, expr, simple, valid in drivers:
         assert simple and valid, (path, expr)
     for f in FRAMES:

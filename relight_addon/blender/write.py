@@ -17,14 +17,15 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
 * Materials ``"<material>.relight"``: a copy of the original whose tree keeps only the original
   Image Texture node and what feeds its Vector input (UV Map node, mapping...; a UV Map node
   names the UV map the reader actually used, e.g. "RelightUV" after Unwrap Missing UVs), plus
-  ``T * sum_k(I_k * M_k)`` -> Emission (strength 1) -> Material Output.  ``I_k`` is a Value
-  node whose output is driven by the SCRIPTED simple expression ``p / P0`` (``p`` = the light
-  data's ``energy``, ``P0`` the power its map was computed at, written as a literal: its power
-  at precompute time, or a reference power for a lamp that was off then); simple expressions
-  evaluate with Python auto-run off and without the extension.  ``P0`` is also kept as
-  ``light.data["relight_power0"]``.  Only ``energy`` is tracked: colour / exposure changes of a
-  light are not followed.  Emissive-face lamps have no light to follow: their ``I_k`` is a
-  constant 1 (reported).
+  ``T * sum_k(I_k * C_k * M_k)`` -> Emission (strength 1) -> Material Output.  ``I_k`` is a
+  Value node whose output is driven by the SCRIPTED simple expression ``p / P0`` (``p`` = the
+  light data's ``energy``, ``P0`` the power its map was computed at, written as a literal: its
+  power at precompute time, or a reference power for a lamp that was off then); ``C_k`` a
+  Combine XYZ node whose three inputs follow the light's colour channel by channel (``c / c0``,
+  ``c0`` its colour then).  Simple expressions evaluate with Python auto-run off and without
+  the extension.  ``P0`` is also kept as ``light.data["relight_power0"]``.  Exposure and
+  temperature changes are not followed.  Emissive-face lamps have no light to follow: their
+  ``I_k`` is a constant 1 (reported).
 * The user's material stays alive: the relit copy holds it in the ID property
   ``relight_original`` (an ID reference counts as a user, so it survives save and reopen), and
   the reader reads through a relit material to it.
@@ -217,6 +218,24 @@ def _add_driver(socket, light_data, p0, label):
     return fc
 
 
+def _add_colour_driver(socket, light_data, channel, c0):
+    """``socket`` follows one channel of the light's colour over its value ``c0`` at
+    precompute (a simple expression: no Python at render time)."""
+    fc = socket.driver_add("default_value")
+    for mod in list(fc.modifiers):
+        fc.modifiers.remove(mod)
+    drv = fc.driver
+    drv.type = "SCRIPTED"
+    var = drv.variables.new()
+    var.name = "c"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = "LIGHT"
+    var.targets[0].id = light_data
+    var.targets[0].data_path = f"color[{channel}]"
+    drv.expression = f"c / {float(c0)!r}"
+    return fc
+
+
 def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=None):
     """maps: list of bpy images (one per lamp); lamps: list of (name, light data or None, P0);
     t_image: the shadow-free texture T_final (None: the original image is T); uv_map: the UV
@@ -277,14 +296,30 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
         scale.location = (x0 + 300, y)
         links.new(mnode.outputs["Color"], scale.inputs[0])
         links.new(val.outputs[0], scale.inputs["Scale"])
+        term = scale.outputs[0]
+        if ldata is not None:       # the light's colour, relative to its colour at precompute
+            colour = tree.nodes.new("ShaderNodeCombineXYZ")
+            colour.name = colour.label = f"C {lname}"
+            colour.location = (x0 + 300, y - 180)
+            c0 = list(ldata.color)
+            for ch in range(3):
+                colour.inputs[ch].default_value = 1.0
+                if c0[ch] > 0:
+                    _add_colour_driver(colour.inputs[ch], ldata, ch, c0[ch])
+            tint = tree.nodes.new("ShaderNodeVectorMath")
+            tint.operation = "MULTIPLY"
+            tint.location = (x0 + 420, y)
+            links.new(term, tint.inputs[0])
+            links.new(colour.outputs[0], tint.inputs[1])
+            term = tint.outputs[0]
         if total is None:
-            total = scale.outputs[0]
+            total = term
         else:
             add = tree.nodes.new("ShaderNodeVectorMath")
             add.operation = "ADD"
             add.location = (x0 + 500, y)
             links.new(total, add.inputs[0])
-            links.new(scale.outputs[0], add.inputs[1])
+            links.new(term, add.inputs[1])
             total = add.outputs[0]
     mul = tree.nodes.new("ShaderNodeVectorMath")
     mul.operation = "MULTIPLY"
