@@ -38,6 +38,8 @@ ROLE_ITEMS = (
     ("relit", "Relit", "A photographed surface: its textures are relit"),
     ("occluder", "Occluder", "Only casts shadows and blocks light (not relit, reflects nothing)"),
     ("ignored", "Ignored", "Not read at all"),
+    ("virtual", "Virtual", "A virtual object, not in the photo: it casts shadows on and "
+                           "reflects light onto the relit surfaces (Update after moving it)"),
 )
 
 OVERLAY_ITEMS = (

@@ -64,7 +64,7 @@ from ..core.texture.colour import srgb_to_linear
 # Material.use_nodes is deprecated (always on) from Blender 5.0.
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
-ROLES = ("relit", "occluder", "ignored")
+ROLES = ("relit", "occluder", "ignored", "virtual")
 ROLE_PROPERTY = "relight_role"
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 AREA_SHAPES = {"SQUARE", "RECTANGLE", "DISK", "ELLIPSE"}
@@ -536,6 +536,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
     lamp_names: list = []
     lamp_intensity: list = []    # per lamp: its power in the photo over the power it is read at
     light_rows: list = []        # core Lights of the lamps that are not patches
+    virtual_patch: list = []     # per patch: part of a virtual object (role "virtual")
     emissive_lamp: dict = {}     # (object, material) -> lamp index
 
     labels_seen: dict = {}
@@ -614,6 +615,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             exitance = area_light_exitance(light, area, power_ref)
             q = len(quads)
             corners.append(quads)
+            virtual_patch.append(np.zeros(q, bool))
             rho.append(np.zeros((q, 3)))
             emission.append(np.tile(exitance, (q, 1)))
             lamp.append(np.full(q, k))
@@ -672,6 +674,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 if role == "occluder":
                     continue
                 obj_rho[sel] = np.clip(info.rho, 0.0, RHO_MAX)
+                if role == "virtual":   # not in the photo: no texels, its material's colour
+                    continue
                 if np.any(info.emission_radiance > 0):
                     key = (label, mkey)
                     if key not in emissive_lamp:
@@ -715,6 +719,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             group.append(obj_group)
             uvs.append(obj_uv)
             image_idx.append(obj_img)
+            virtual_patch.append(np.full(p, role == "virtual"))
             # Cycles' mesh emission is two-sided: the back of an emissive face emits too (a
             # copy facing the other way; the front already blocks rays).
             em = np.flatnonzero((obj_lamp >= 0) & obj_two_sided)
@@ -727,6 +732,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 group.append(obj_group[em])
                 uvs.append(reverse_winding(obj_uv[em]))
                 image_idx.append(np.full(len(em), -1))
+                virtual_patch.append(np.zeros(len(em), bool))
         finally:
             ev.to_mesh_clear()
 
@@ -749,7 +755,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
         lamp_names=lamp_names, occluder=cat(occluder, (0,), bool), group=cat(group, (0,), np.int32),
         uv=cat(uvs, (0, 4, 2), np.float64), image=cat(image_idx, (0,), np.int32),
         images=image_list, viewpoint=viewpoint, lamp_intensity=np.array(lamp_intensity, float),
-        lights=Lights.concat(light_rows))
+        lights=Lights.concat(light_rows), virtual=cat(virtual_patch, (0,), bool))
     report.zero_area_skipped = data.dropped_degenerate
     report.duplicates_skipped = data.dropped_duplicate
     for dropped, kept in data.duplicate_groups:

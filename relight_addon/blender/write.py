@@ -477,7 +477,8 @@ def write_results(context, scene_data, report, solution) -> dict:
             mat_objects.setdefault(mat_name, set()).add(report.sources.get(label, label))
             mat_uv.setdefault(mat_name, set()).add(report.uv_maps.get((label, mat_name), ""))
         if np.any(imgs < 0) and scene_data.lamp is not None and \
-                np.any((image < 0) & (group == g) & (np.asarray(scene_data.lamp) < 0)):
+                np.any((image < 0) & (group == g) & (np.asarray(scene_data.lamp) < 0)
+                       & ~scene_data.virtual):
             no_image.add((label, mat_name))
     for label, mat_name in sorted(no_image):
         warnings.append(f"'{label}' / material '{mat_name or '(none)'}': faces without an "

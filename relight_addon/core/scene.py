@@ -86,6 +86,8 @@ class SceneData:
                         intensity 0.  Default: every lamp at 1.
     lights    Lights    lamps that are not patches (point, spot, sun, area with a spread):
                         core/lights.py; each row names its lamp index.
+    virtual   (p,)      bool: patches of virtual objects (not in the photo: they cast shadows on
+                        and reflect light onto the photographed surfaces, which are relit)
     """
 
     corners: np.ndarray
@@ -101,6 +103,7 @@ class SceneData:
     viewpoint: np.ndarray | None = None
     lamp_intensity: np.ndarray | None = None
     lights: object = None
+    virtual: np.ndarray | None = None
     dropped_degenerate: int = 0
     dropped_duplicate: int = 0
     duplicate_groups: list = field(default_factory=list)   # (dropped group, kept group) pairs
@@ -115,6 +118,8 @@ class SceneData:
                          else np.broadcast_to(np.asarray(self.occluder, bool), (p,)).copy())
         self.group = (np.zeros(p, np.int32) if self.group is None
                       else np.broadcast_to(np.asarray(self.group, np.int32), (p,)).copy())
+        self.virtual = (np.zeros(p, bool) if self.virtual is None
+                        else np.broadcast_to(np.asarray(self.virtual, bool), (p,)).copy())
         if not np.all(np.isfinite(self.corners)):
             raise SceneError("Some vertices have non-finite coordinates")
         if np.any(self.rho < 0) or np.any(self.rho >= 1):
@@ -144,7 +149,7 @@ class SceneData:
 
     # -- construction helpers -------------------------------------------------------------
     def _per_patch_arrays(self):
-        names = ["corners", "rho", "emission", "lamp", "occluder", "group"]
+        names = ["corners", "rho", "emission", "lamp", "occluder", "group", "virtual"]
         if self.uv is not None:
             names.append("uv")
         if self.image is not None:
@@ -208,6 +213,24 @@ class SceneData:
         new = object.__new__(SceneData)
         new.__dict__.update(self.__dict__)
         new.rho = np.clip(np.asarray(rho, float), 0.0, RHO_MAX)
+        return new
+
+    def without_virtual(self) -> "SceneData":
+        """A copy without the virtual objects' patches (the scene the photo shows); the others
+        keep their order, so they come first in the full scene too (virtual patches are last:
+        see ``virtual_last``)."""
+        new = object.__new__(SceneData)
+        new.__dict__.update(self.__dict__)
+        new._take(np.flatnonzero(~self.virtual))
+        return new
+
+    def virtual_last(self) -> "SceneData":
+        """A copy with the virtual objects' patches moved after all the others."""
+        if not self.virtual.any():
+            return self
+        new = object.__new__(SceneData)
+        new.__dict__.update(self.__dict__)
+        new._take(np.concatenate([np.flatnonzero(~self.virtual), np.flatnonzero(self.virtual)]))
         return new
 
     def without_lamps(self, drop) -> "SceneData":
@@ -296,7 +319,7 @@ def scene_fingerprint(data: SceneData, textures: bool = True) -> str:
         peak = emission[sel].max() if sel.any() else 0.0
         if peak > 0:
             colour[sel] = emission[sel] / peak
-    arrays = [data.corners, colour, data.lamp, data.occluder, data.group,
+    arrays = [data.corners, colour, data.lamp, data.occluder, data.group, data.virtual,
               *data.lights.fingerprint_arrays()]
     if textures:
         arrays += [data.rho] + [a for a in (data.uv, data.image) if a is not None]

@@ -138,6 +138,14 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     opt = options or ShadowFreeOptions()
     if opt.mode not in ("element", "texel", "none"):
         raise ValueError(f"unknown mode {opt.mode!r}")
+    if scene.virtual.any():
+        # Virtual objects are not in the photo: the room is precomputed without them, then
+        # their shadows and reflections are put into the maps (virtual.py).
+        if opt.mode != "texel":
+            raise ValueError("Virtual objects need the per-texel shadow removal")
+        from .virtual import add_objects
+        room = shadow_free(scene.without_virtual(), options, occluder, progress, reuse)
+        return add_objects(room, scene)
     if scene.n_lamps == 0:
         raise ValueError("The scene has no lamps: nothing to relight")
     timings = {}

@@ -1,4 +1,6 @@
-"""Virtual lamps (seed 000 §4.4.1): lamps that are not in the photo, added to a finished precompute.
+"""Virtual lamps and objects (seed 000 §4.4): what is not in the photo, added to a precompute.
+
+Virtual lamps.
 
 Light transport is linear in the lamps, so a lamp added after the precompute only needs its own
 basis on the existing radiosity mesh and links, its own direct light per texel, and its map
@@ -8,6 +10,13 @@ texture, the other maps and the reflectances stay as they are.  The lamps are gi
 exitance factor is the real lamps' common factor (the user's power units are the real lamps').
 The new lamps' direct light on every leaf is reflected through the existing transport, so they
 light the room with its interreflections and are shadowed by its geometry.
+
+Virtual objects.  The photo shows the room without them, so the shadow-free texture and the
+irradiance the photo was lit by come from the room alone; what they change is each lamp's light
+on the room: their shadows, and the light they reflect.  ``add_objects`` solves the room with
+them and without them on the same terms (patch reflectances, the same preset and seeds) and
+multiplies every map by the ratio of the two, per lamp and texel, so that the discretisation
+cancels and the maps are untouched away from the objects.
 """
 from __future__ import annotations
 
@@ -121,3 +130,69 @@ def keep_lamps(result, drop):
         "scale", "photo_ratio", "uncertainty", "applied", "equal", "nnls")})
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
                                lamps=lamps, solution=new_sol)
+
+
+def add_objects(result, scene, progress=None):
+    """A copy of ``result`` (the precompute of ``scene`` without its virtual objects, per
+    texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``)."""
+    from ..geometry.raycast import make_occluder
+    from ..radiosity.precompute import solve_basis, solve_radiosity
+    from ..scene import SceneData
+    from .maps import FACTOR_MAX
+    if result.denominator is None:
+        raise ValueError("virtual objects are added to a per-texel result only")
+    base = result.solution.scene                 # the room as precomputed (oriented, backs)
+    objects = scene.virtual_last()
+    extra = slice(int((~objects.virtual).sum()), objects.n_patches)
+    if extra.start == extra.stop:
+        return result
+    # The room's patch reflectances (the mean of its leaves' estimates), then the objects'.
+    sol = result.solution
+    rho = base.rho.copy()
+    a = sol.system.leaf_area
+    for c in range(3):
+        num = np.bincount(sol.system.patch, a * sol.system.rho[:, c], base.n_patches)
+        den = np.bincount(sol.system.patch, a, base.n_patches)
+        rho[:, c] = np.where(den > 0, num / np.maximum(den, 1e-300), rho[:, c])
+    room = base.with_rho(rho)
+    combined = object.__new__(SceneData)
+    combined.__dict__.update(room.__dict__)
+    n_extra = extra.stop - extra.start
+    for name in room._per_patch_arrays():
+        add = getattr(objects, name)
+        if name == "image":                  # the objects take no texels of the photos
+            add = np.full(n_extra, -1)
+        elif add is None:                    # uv of a scene without UVs
+            add = np.zeros((n_extra, 4, 2))
+        else:
+            add = add[extra]
+        setattr(combined, name, np.concatenate([getattr(room, name), add]))
+    opt = result.options
+    scale = result.exitance_scale
+    tm = result.texel_map
+    H = []
+    for sc in (room, combined):
+        tris = sc.occluder_triangles()
+        occ = make_occluder(tris) if len(tris) else None
+        s = solve_radiosity(sc, opt.preset, occluder=occ, seed=opt.seed)
+        solve_basis(s, sc.rho[s.system.patch], scale)
+        H.append(TexelLight(sc, tm, occ, opt.texel_rays, opt.texel_samples,
+                            opt.seed + 202).irradiance(s, scale)[0])              # (k, T, 3)
+    without, with_ = H
+    ratio = np.where(without > 0, with_ / np.where(without > 0, without, 1.0), 1.0)
+    ratio = np.clip(ratio, 0.0, FACTOR_MAX)
+    new_maps, _ = map_images(tm, _texel_maps(result) * ratio)
+    return dataclasses.replace(result, maps=new_maps)
+
+
+def _texel_maps(result):
+    """The maps per texel (k, T, 3), read back from the result's images."""
+    tm = result.texel_map
+    k = result.solution.scene.n_lamps
+    parts = []
+    for i, im in enumerate(tm.images):
+        if len(im) == 0:
+            continue
+        m = result.maps[i].reshape(k, -1, 3)
+        parts.append(m[:, im.texel_index])
+    return np.concatenate(parts, axis=1) if parts else np.zeros((k, 0, 3))

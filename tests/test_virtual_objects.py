@@ -1,0 +1,85 @@
+"""Virtual objects (issue 11, first part): a mesh whose Relight Role is "virtual" is not in the
+photo; Update puts its shadows and reflections into the maps of the relit surfaces.
+
+The photographed office of scenes.office (24 texels per surface, 512-sample Cycles bakes: the
+photo without the object, seed 0; the truth with a grey 0.6 m box on the floor, seed 1).  The
+relit colour is read from the written images and the drivers, as a render shows it.
+"""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit  # noqa: E402
+from test_precompute_operator import _addon  # noqa: E402
+
+
+def _grey_box(location, size=0.6):
+    bpy.ops.mesh.primitive_cube_add(size=size, location=location)
+    box = bpy.context.active_object
+    box.name = "VBox"
+    mat = bpy.data.materials.new("grey")
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+    bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    box.data.materials.append(mat)
+    return box
+
+
+def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
+    from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
+    from scenes.bake import bake_lighting
+    from scenes.office import build_office
+    sys.path.insert(0, ROOT)
+    from demo.office import make_photographed
+    _addon()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
+    power = dict(info.lamp_powers)
+    photo = bake_lighting(power, samples=SAMPLES, seed=0, texture_size=SIZE)
+    box = _grey_box((3.6, 1.0, 0.3))
+    truth = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE, objects=info.objects)
+    bpy.data.objects.remove(box)
+    make_photographed(bpy, info, photo)
+    scene = bpy.context.scene
+    scene.relight.preset = "medium"
+    assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
+    ignoring = _relit(info)
+    box = _grey_box((3.6, 1.0, 0.3))
+    box.relight_role = "virtual"
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert not box.material_slots[0].material.get("relight_generated")    # not relit
+    with_box = _relit(info)
+    names = info.objects
+    want = np.concatenate([np.asarray(truth[n], np.float64).reshape(-1, 3) for n in names])
+    ph = np.concatenate([np.asarray(photo[n], np.float64).reshape(-1, 3) for n in names])
+    white = np.percentile(want @ LUM, 99)
+    # the box's cast shadow: darker than the photo, but not the floor hidden under the box
+    shadow = (want @ LUM < 0.8 * ph @ LUM) & (want @ LUM > 0.05 * ph @ LUM)
+    visible = want @ LUM > 0.05 * ph @ LUM
+    assert shadow.sum() >= 10
+
+    def de(got):
+        g = np.concatenate([got[n].reshape(-1, 3) for n in names])
+        return delta_e_2000(linear_rgb_to_lab(np.clip(g / white, 0, None)),
+                            linear_rgb_to_lab(np.clip(want / white, 0, None)))
+    d_with, d_without = de(with_box), de(ignoring)
+    print(f"virtual box: overall {d_with[visible].mean():.2f} (ignoring it "
+          f"{d_without[visible].mean():.2f}), its shadow {d_with[shadow].mean():.2f} "
+          f"(ignoring it {d_without[shadow].mean():.2f})")
+    assert d_with[visible].mean() <= 1.5
+    assert d_with[shadow].mean() < 0.5 * d_without[shadow].mean()
+    # moving it away and updating takes its shadow away again
+    box.relight_role = "ignored"
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    back = de(_relit(info))
+    assert abs(back[shadow].mean() - d_without[shadow].mean()) < 0.25 * d_without[shadow].mean()
