@@ -217,6 +217,7 @@ class _PrecomputeRunner(RelightOperator):
         scene = context.scene
         from ..relight_addon.core.relight.diagnose import diagnose
         summary = write.write_results(context, data, read_report, solution)
+        moving = self._sync_spheres(context, read_report)
         for sentence in diagnose(solution, solution.photographed,
                                  lambda g: read_report.groups[g][0]):
             read_report.warn(sentence)
@@ -234,11 +235,23 @@ class _PrecomputeRunner(RelightOperator):
             self.report({'WARNING'}, w)
         done = (f"Relight: {summary['materials']} material(s), {summary['images']} image(s), "
                 f"{summary['lamps']} lamp(s)")
+        if moving["objects"]:
+            done += f", {moving['objects']} moving object(s)"
         if warnings:
             self.report({'WARNING'}, f"{done}, {len(warnings)} warning(s): see the Relight panel")
         else:
             self.report({'INFO'}, done)
         return {'FINISHED'}
+
+    def _sync_spheres(self, context, read_report):
+        """The moving virtual objects' sphere shadows (fitted again only if their mesh or
+        sphere count changed; their transforms are followed by drivers)."""
+        from ..relight_addon.blender import sphere_nodes
+        try:
+            return sphere_nodes.sync(context.scene, context.evaluated_depsgraph_get())
+        except Exception as ex:
+            read_report.warn(f"Moving objects' shadows could not be made: {user_message(ex)}")
+            return {"objects": 0, "fitted": 0, "materials": 0}
 
     def _status(self, context, text):
         ws = getattr(context, "workspace", None)
@@ -334,8 +347,16 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
         if st and write.has_relight_data(scene) and st.get("preset") == preset \
                 and st.get("correction") == correction:
             if st.get("fingerprint") == scene_fingerprint(data):
-                self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
-                                      "precompute)")
+                moving = self._sync_spheres(context, report)
+                for w in report.warnings:
+                    self.report({'WARNING'}, w)
+                if moving["fitted"] or moving["objects"]:
+                    self.report({'INFO'}, f"Relight: {moving['objects']} moving object(s), "
+                                          f"{moving['fitted']} fitted again; the maps are up "
+                                          "to date")
+                else:
+                    self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
+                                          "precompute)")
                 return {'FINISHED'}
             virtual = virtual_indices(report)
             real = data.without_lamps(virtual)

@@ -42,6 +42,14 @@ ROLE_ITEMS = (
                            "reflects light onto the relit surfaces (Update after moving it)"),
 )
 
+SHADOW_ITEMS = (
+    ("EXACT", "Exact", "Ray-traced into the maps on Update, with the light the object blocks and "
+                       "reflects; Update after moving it"),
+    ("SPHERES", "Moving", "Soft shadows of a set of spheres, evaluated by the relit materials: "
+                          "they follow the object's animation and drags at once, and render on "
+                          "a farm without the extension (direct light only)"),
+)
+
 OVERLAY_ITEMS = (
     ("NONE", "None", "No overlay"),
     ("RATIO", "B / D", "Radiosity elements coloured by B / D: white where nothing blocks the "
@@ -177,6 +185,13 @@ def attach():
         name="Relight Role", items=ROLE_ITEMS, default="relit",
         description="How Relight treats this object: relit photographed surface, occluder only, "
                     "or ignored")
+    bpy.types.Object.relight_shadows = EnumProperty(
+        name="Shadows", items=SHADOW_ITEMS, default="EXACT",
+        description="How a virtual object's shadows are computed")
+    bpy.types.Object.relight_spheres = bpy.props.IntProperty(
+        name="Spheres", default=32, min=1, max=512,
+        description="Spheres approximating a moving virtual object (more: closer shadows, "
+                    "slower renders); Update after changing it")
     if _forget_all not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(_forget_all)
 
@@ -186,8 +201,9 @@ def detach():
         bpy.app.handlers.load_post.remove(_forget_all)
     if hasattr(bpy.types.Scene, "relight"):
         del bpy.types.Scene.relight
-    if hasattr(bpy.types.Object, "relight_role"):
-        del bpy.types.Object.relight_role
+    for prop in ("relight_role", "relight_shadows", "relight_spheres"):
+        if hasattr(bpy.types.Object, prop):
+            delattr(bpy.types.Object, prop)
     _RESULTS.clear()
     if not bpy.app.background:
         from ..relight_addon.blender import overlay

@@ -90,6 +90,12 @@ class RELIGHT_PT_main(bpy.types.Panel):
                 box.label(text=f"{obj.name}: role '{raw}' (custom property)", icon='OBJECT_DATA')
             else:
                 box.prop(obj, "relight_role", text=f"{obj.name} Role")
+            if getattr(obj, "relight_role", None) == "virtual" and \
+                    hasattr(obj, "relight_shadows"):
+                row = box.row(align=True)
+                row.prop(obj, "relight_shadows")
+                if obj.relight_shadows == "SPHERES":
+                    row.prop(obj, "relight_spheres")
 
         settings = getattr(context.scene, "relight", None)
         if settings is not None:

@@ -101,6 +101,7 @@ class ReadReport:
     # per lamp index: {"name", "object", "kind" ("light" | "emissive"), "power_photo" (its power
     # as read), "power_ref" (the power its emission here stands for)}
     lamp_sources: list = field(default_factory=list)
+    moving_objects: list = field(default_factory=list)   # virtual, shadows by spheres: not read
     sources: dict = field(default_factory=dict)   # label -> object whose slots it uses
     uv_maps: dict = field(default_factory=dict)   # (label, material) -> UV map read
 
@@ -488,6 +489,11 @@ def object_role(obj, roles=None):
     return role if role in ROLES else None
 
 
+def _moving(obj) -> bool:
+    from .sphere_nodes import moving
+    return moving(obj)
+
+
 def _has_role(obj, roles):
     return (roles and obj.name in roles) or object_role(obj) not in (None, "relit")
 
@@ -560,6 +566,9 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             report.warn(f"Object '{role_of.name}': unknown {ROLE_PROPERTY} "
                         f"'{role_of.get(ROLE_PROPERTY)}', read as relit")
             role = "relit"
+        if role == "virtual" and _moving(role_of):     # sphere shadows at render time
+            report.moving_objects.append(label)
+            continue
         if obj.hide_render or (parent is not None and parent.hide_render) or role == "ignored":
             report.ignored_objects.append(label)
             continue

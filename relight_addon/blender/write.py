@@ -11,18 +11,20 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
 * ``T_final`` is written as ``"<image>.relight.T"`` (half float, Non-Color = linear, unclamped
   above 1, packed) and replaces the image of the relit material's copy of the texture node
   (named ``"T"``); the original image is never modified.
-* Images ``"<image>.relight.<lamp>"``: float, Non-Color, RGBA (alpha 1), half-float OpenEXR
-  (ZIP), packed into the .blend; their user is the relit material.  Half floats quantise M_k
+* Images ``"<image>.relight.<lamp>"``: float, Non-Color, RGBA, half-float OpenEXR (ZIP), packed
+  into the .blend; their user is the relit material.  Alpha (channel-packed) is the part of the
+  map that is the lamp's direct light (per-texel runs; 1 otherwise).  Half floats quantise M_k
   (spacing 2**-11 just below 1), so the written maps sum to 1 within about 1e-3.
 * Materials ``"<material>.relight"``: a copy of the original whose tree keeps only the original
   Image Texture node and what feeds its Vector input (UV Map node, mapping...; a UV Map node
   names the UV map the reader actually used, e.g. "RelightUV" after Unwrap Missing UVs), plus
-  ``T * sum_k(I_k * C_k * M_k)`` -> Emission (strength 1) -> Material Output.  ``I_k`` is a
+  ``T * sum_k(I_k * C_k * M_k * S_k)`` -> Emission (strength 1) -> Material Output.  ``I_k`` is a
   Value node whose output is driven by the SCRIPTED simple expression ``p / P0`` (``p`` = the
   light data's ``energy``, ``P0`` the power its map was computed at, written as a literal: its
   power at precompute time, or a reference power for a lamp that was off then); ``C_k`` a
   Combine XYZ node whose three inputs follow the light's colour channel by channel (``c / c0``,
-  ``c0`` its colour then).  Simple expressions evaluate with Python auto-run off and without
+  ``c0`` its colour then); ``S_k`` a Vector Math Scale node whose factor is 1, or the moving
+  objects' sphere shadows of that lamp (sphere_nodes.py).  Simple expressions evaluate with Python auto-run off and without
   the extension.  ``P0`` is also kept as ``light.data["relight_power0"]``.  Exposure and
   temperature changes are not followed.  Emissive-face lamps have no light to follow: their
   ``I_k`` is a constant 1 (reported).
@@ -55,6 +57,8 @@ OBJECT_LINKS = "relight_object_slots"  # on a relit material: override objects w
 POWER0 = "relight_power0"
 HALF_MAX = 65504.0
 T_NODE = "T"
+MAP_PREFIX = "M "          # the node of lamp k's map image: "M <lamp name>"
+SHADOW_PREFIX = "S "       # lamp k's moving-shadow factor: "S <lamp name>" (Scale input)
 MAT_SUFFIX = ".relight"
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
@@ -127,12 +131,15 @@ def original_material(mat):
     return None
 
 
-def _float_image(name, rgb):
+def _float_image(name, rgb, alpha=None):
     hh, ww = rgb.shape[:2]
     img = bpy.data.images.new(name, ww, hh, alpha=True, float_buffer=True)
     img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"        # alpha is data (the direct fraction), not coverage
     rgba = np.ones((hh, ww, 4), np.float32)
     rgba[..., :3] = rgb
+    if alpha is not None:
+        rgba[..., 3] = alpha
     img.pixels.foreach_set(rgba.reshape(-1))
     return img
 
@@ -155,15 +162,18 @@ class _HalfWriter:
         s.color_depth = "16"
         s.exr_codec = "ZIP"
 
-    def write(self, name, rgb):
+    def write(self, name, rgb, alpha=None):
         import os
         rgb = np.clip(np.nan_to_num(rgb), -HALF_MAX, HALF_MAX)   # half floats end at 65504
-        tmp = _float_image("relight_tmp_image", rgb)
+        if alpha is not None:
+            alpha = np.clip(np.nan_to_num(alpha, nan=1.0), 0.0, 1.0)
+        tmp = _float_image("relight_tmp_image", rgb, alpha)
         path = os.path.join(self.dir, "image.exr")
         try:
             tmp.save_render(path, scene=self.scene)
             img = bpy.data.images.load(path, check_existing=False)
             img.colorspace_settings.name = "Non-Color"
+            img.alpha_mode = "CHANNEL_PACKED"
             img.pack()
             img.name = name
             img.filepath_raw = f"//relight/{bpy.path.clean_name(name)}.exr"
@@ -174,7 +184,7 @@ class _HalfWriter:
             if os.path.exists(path):
                 os.remove(path)
         if img is None:
-            img = _float_image(name, rgb)
+            img = _float_image(name, rgb, alpha)
             img.file_format = "OPEN_EXR"
             img.pack()
         _tag(img, self.key)
@@ -277,7 +287,7 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
         y = y0 - 300 * (j + 1)
         mnode = tree.nodes.new("ShaderNodeTexImage")
         mnode.image = img
-        mnode.name = mnode.label = f"M {lname}"
+        mnode.name = mnode.label = f"{MAP_PREFIX}{lname}"
         mnode.interpolation = tex.interpolation
         mnode.extension = tex.extension
         mnode.location = (x0, y)
@@ -312,6 +322,14 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
             links.new(term, tint.inputs[0])
             links.new(colour.outputs[0], tint.inputs[1])
             term = tint.outputs[0]
+        # The moving objects' shadows (sphere_nodes.py link their factor here; 1 without)
+        shadow = tree.nodes.new("ShaderNodeVectorMath")
+        shadow.operation = "SCALE"
+        shadow.name = shadow.label = f"{SHADOW_PREFIX}{lname}"
+        shadow.location = (x0 + 460, y - 120)
+        shadow.inputs["Scale"].default_value = 1.0
+        links.new(term, shadow.inputs[0])
+        term = shadow.outputs[0]
         if total is None:
             total = term
         else:
@@ -395,6 +413,9 @@ def clear_relight_data(scene) -> dict:
     imgs = [im for im in bpy.data.images if _ours(im, key) or (_is_generated(im) and im.users == 0)]
     for im in imgs:
         bpy.data.images.remove(im)
+    groups = [g for g in bpy.data.node_groups if _ours(g, key)]    # lamp and sphere groups
+    for g in groups:
+        bpy.data.node_groups.remove(g)
     lights = 0
     for obj in scene.objects:
         if obj.type == "LIGHT" and POWER0 in obj.data and _editable(obj.data):
@@ -443,6 +464,7 @@ def write_results(context, scene_data, report, solution) -> dict:
     ``solution``: a ShadowFreeResult (T_final and M_k per image; T_final is written as
     ``"<image>.relight.T"`` unless the correction was off).
     Returns a summary dict (images, materials, objects, lamps, slots, warnings)."""
+    from . import sphere_nodes
     scene = context.scene
     warnings = []
     key = scene_key(scene, create=True)
@@ -463,6 +485,13 @@ def write_results(context, scene_data, report, solution) -> dict:
         else:
             warnings.append(f"Lamp '{name}' is not a light object: its intensity is fixed at 1")
             lamps.append((name, None, 1.0))
+        # where moving objects' shadows (sphere_nodes.py) see the lamp from
+        if obj is not None and obj.type == "LIGHT":
+            sphere_nodes.make_lamp_group(name, key, obj)
+        elif name in scene_data.lamp_names:
+            centre, radius = sphere_nodes.emissive_disk(scene_data,
+                                                        scene_data.lamp_names.index(name))
+            sphere_nodes.make_lamp_group(name, key, None, centre, radius)
 
     # Materials with image faces (material name -> image index) and the objects using them.
     group = np.asarray(scene_data.group)
@@ -512,7 +541,9 @@ def write_results(context, scene_data, report, solution) -> dict:
             if i not in used_images:
                 continue
             src = scene_data.images[i].name
-            made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j])
+            direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
+            made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j],
+                                           None if direct is None else direct[j])
                               for j, (lname, _, _) in enumerate(lamps)]
             if i in textures:
                 t_images[i] = writer.write(f"{src}.relight.T", textures[i])

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..texture.colour import luminance
 from ..texture.mapping import dilate_seams, texel_elements, vertex_interpolate
 
 FACTOR_MAX = 64.0
@@ -74,6 +75,22 @@ def map_images(tm, maps, seam_pixels=SEAM_PIXELS):
         mp[i] = np.nan_to_num(m)
         cov[i] = im.coverage.copy()
     return mp, cov
+
+
+def direct_fraction(direct_k, Hocc_k):
+    """Per lamp and texel (k, T), the part of the lamp's light that comes straight from it:
+    luminance(direct) / luminance(direct + indirect), in [0, 1] (1 where there is no light).
+    A shadow cast later by a moving object (sphere_shadow.py) scales this part only."""
+    d = luminance(np.maximum(direct_k, 0.0))
+    h = luminance(np.maximum(Hocc_k, 0.0))
+    return np.clip(np.where(h > 0, d / np.where(h > 0, h, 1.0), 1.0), 0.0, 1.0)
+
+
+def fraction_images(tm, fraction, seam_pixels=SEAM_PIXELS):
+    """Per-texel fractions (k, T) -> {image index: (k, H, W) float32}, dilated like the maps."""
+    mp, _ = map_images(tm, np.repeat(np.asarray(fraction, np.float32)[..., None], 3, axis=-1),
+                       seam_pixels)
+    return {i: m[..., 0].copy() for i, m in mp.items()}
 
 
 def texture_images(tm, t_final, images):

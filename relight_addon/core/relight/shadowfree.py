@@ -38,8 +38,8 @@ from ..texture.mapping import patch_means, rasterize_patches, texel_elements, ve
 from .albedo import albedo_rounds, estimate_reflectance
 from .exitance import fit_lamps, photo_misfit
 from .orient import orient
-from .maps import (clipped_ratio, map_images, maps_from, ratio_maps, texels_of,
-                   texture_images)
+from .maps import (clipped_ratio, direct_fraction, fraction_images, map_images, maps_from,
+                   ratio_maps, texels_of, texture_images)
 from .reference import reference_correction
 from .refine import refine_by_texture
 from .texel import TexelLight
@@ -90,6 +90,9 @@ class ShadowFreeResult:
     # by (virtual lamps added later divide by it too), and the occluder the run used
     denominator: np.ndarray | None = None
     occluder: object = None
+    # texel mode: per image (k, H, W) the part of each map that is the lamp's direct light
+    # (maps.direct_fraction): a moving object's sphere shadow scales that part only
+    direct: dict | None = None
 
     @property
     def exitance_scale(self) -> np.ndarray:
@@ -201,7 +204,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     misfit = photo_misfit(sol, tm, photo, use_patch)
 
     def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None,
-               denominator=None):
+               denominator=None, direct=None):
         stage(1.0, None)
         stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
         if orientation is not None:
@@ -209,7 +212,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
                          two_sided=orientation.per_group("two_sided"))
         return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
                                 solution, first, stats, timings, reference_info, use_patch,
-                                denominator, occluder)
+                                denominator, occluder, direct)
 
     # 4. DRB97: the photo as it is, maps B_k / sum B.
     if opt.mode == "none":
@@ -220,7 +223,8 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     # 2. Per texel: direct light ray-cast at every texel, indirect from the solution.
     if opt.mode == "texel":
         stage(0.6, "Per-texel irradiance")
-        Hocc_k, HU_k = texel_light.irradiance(sol, scale_k)
+        (O_k, U_k), (ind_occ, ind_un) = texel_light.parts(sol, scale_k)
+        Hocc_k, HU_k = np.maximum(O_k + ind_occ, 0.0), np.maximum(U_k + ind_un, 0.0)
         Hocc = as_given(Hocc_k, scene)
         # Removing occlusion never darkens (E-bar >= 0; sampling noise could say otherwise).
         factor = clipped_ratio(as_given(HU_k, scene), Hocc, fmin=1.0)
@@ -231,8 +235,9 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         maps = maps_from(Hocc_k, Hocc * factor)
         stage(0.95, "Writing maps")
         mp, cov = map_images(tm, maps)
+        direct = fraction_images(tm, direct_fraction(O_k, Hocc_k))
         return result(texture_images(tm, t_final, scene.images), mp, cov, sol,
-                      denominator=Hocc * factor)
+                      denominator=Hocc * factor, direct=direct)
 
     # 3. Per element (the seed's pipeline).
     if opt.refine:

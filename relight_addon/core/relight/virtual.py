@@ -28,7 +28,7 @@ import numpy as np
 from ..lights import Lights
 from ..radiosity.precompute import lights_on_elements
 from ..texture.mapping import texel_elements, vertex_interpolate
-from .maps import map_images, maps_from
+from .maps import direct_fraction, fraction_images, map_images, maps_from
 from .texel import TexelLight
 from .transport import Transport
 
@@ -101,6 +101,10 @@ def add_lamps(result, lights: Lights, names, seed=0):
     H_new = np.maximum(np.moveaxis(O1[:, k0:] * s, 1, 0) + H_new, 0.0)    # (m, T, 3)
     new_maps, _ = map_images(tm, maps_from(H_new, result.denominator))
     maps = {i: np.concatenate([result.maps[i], new_maps[i]]) for i in result.maps}
+    direct = None
+    if result.direct is not None:
+        new_direct = fraction_images(tm, direct_fraction(np.moveaxis(O1[:, k0:] * s, 1, 0), H_new))
+        direct = {i: np.concatenate([result.direct[i], new_direct[i]]) for i in result.direct}
     est = result.lamps
     lamps = dataclasses.replace(
         est, scale=np.concatenate([est.scale, np.full(m, s)]),
@@ -108,7 +112,7 @@ def add_lamps(result, lights: Lights, names, seed=0):
         uncertainty=np.concatenate([est.uncertainty, np.full(m, np.nan)]),
         applied=np.concatenate([est.applied, np.zeros(m, bool)]),
         equal=np.concatenate([est.equal, np.ones(m)]), nnls=np.concatenate([est.nnls, np.zeros(m)]))
-    return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol)
+    return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol, direct=direct)
 
 
 def keep_lamps(result, drop):
@@ -128,8 +132,9 @@ def keep_lamps(result, drop):
     est = result.lamps
     lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
         "scale", "photo_ratio", "uncertainty", "applied", "equal", "nnls")})
+    direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
-                               lamps=lamps, solution=new_sol)
+                               lamps=lamps, solution=new_sol, direct=direct)
 
 
 def add_objects(result, scene, progress=None):

@@ -1,0 +1,452 @@
+"""Moving virtual objects: their soft shadows evaluated by the relit materials at render time.
+
+A virtual object whose shadows are set to "Moving" is not put into the precompute; it is
+approximated by spheres in its own coordinates (core/relight/spheres.py) and every relit material
+multiplies each lamp's term by ``1 - a_k (1 - V_k)``: ``V_k`` the part of lamp k seen past the
+spheres (core/relight/sphere_shadow.py, of which the node group below is a twin: the same
+operations in the same order), ``a_k`` the part of the map that is the lamp's direct light (the
+map image's alpha).  Nothing runs in Python at render time:
+
+* ``"Relight Lamp <lamp>"`` node groups (one per lamp, made by write.py) output the lamp's world
+  position and radius, driven from the light (TRANSFORMS driver variables, simple expressions);
+  a sun is a disk SUN_DISTANCE away along its direction; an emissive-face lamp is a constant disk.
+* ``"Relight Spheres <object>"`` node groups (one per moving object) take the shading point and a
+  lamp, bring both into the object's frame (its world location, rotation and scale, driven) and
+  return V.  Spheres are fitted once; the object's animation, drags and parenting move them.
+
+So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
+the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
+needs Update (the spheres are fitted again).  The shadows fall on the relit surfaces only, the
+indirect light the object blocks or reflects is not modelled (the "Exact" mode does that, on
+Update), and an object's own appearance is lit as any object in the scene.
+"""
+from __future__ import annotations
+
+import hashlib
+
+import bpy
+import numpy as np
+
+from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
+from ..core.relight.spheres import fit_spheres
+
+LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
+OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
+FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
+SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (object frame)
+NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
+SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPHERES"
+COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
+DEFAULT_SPHERES = 32
+SQRT_PI = float(np.sqrt(np.pi))
+
+
+def _prop(obj, name, default):
+    raw = obj.get(name) if hasattr(obj, "get") else None
+    if isinstance(raw, (str, int)) and not isinstance(raw, bool):
+        return raw
+    return getattr(obj, name, default)
+
+
+def moving(obj) -> bool:
+    """A virtual object whose shadows follow it at render time (spheres)."""
+    from .read import object_role
+    return (obj.type == "MESH" and object_role(obj) == "virtual"
+            and _prop(obj, SHADOW_PROPERTY, "EXACT") == "SPHERES")
+
+
+def sphere_count(obj) -> int:
+    return max(1, min(512, int(_prop(obj, COUNT_PROPERTY, DEFAULT_SPHERES))))
+
+
+def moving_objects(scene):
+    return [o for o in scene.objects if moving(o) and not o.hide_render]
+
+
+# -- drivers -----------------------------------------------------------------------------------
+
+def _driver(socket, expression, variables, index=-1):
+    fc = socket.driver_add("default_value", index) if index >= 0 else \
+        socket.driver_add("default_value")
+    for mod in list(fc.modifiers):
+        fc.modifiers.remove(mod)
+    drv = fc.driver
+    drv.type = "SCRIPTED"
+    for name, kind, target, what in variables:
+        var = drv.variables.new()
+        var.name = name
+        t = var.targets[0]
+        if kind == "TRANSFORMS":
+            var.type = "TRANSFORMS"
+            t.id = target
+            t.transform_type = what
+            t.transform_space = "WORLD_SPACE"
+            if what.startswith("ROT"):
+                t.rotation_mode = "QUATERNION"
+        else:
+            var.type = "SINGLE_PROP"
+            t.id_type = "LIGHT"
+            t.id = target
+            t.data_path = what
+    drv.expression = expression
+    return fc
+
+
+def _transform_vars(obj, what):
+    return [(w.lower().replace("_", ""), "TRANSFORMS", obj, w) for w in what]
+
+
+# -- node helpers ------------------------------------------------------------------------------
+
+class _Builder:
+    def __init__(self, tree):
+        self.tree, self.x = tree, 0
+
+    def math(self, op, a, b=None, value=None):
+        n = self.tree.nodes.new("ShaderNodeMath")
+        n.operation = op
+        n.location = (self.x, 0)
+        self.x += 10
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, (int, float)):
+                n.inputs[i].default_value = float(v)
+            else:
+                self.tree.links.new(v, n.inputs[i])
+        return n.outputs[0]
+
+    def vmath(self, op, a, b=None, scale=None):
+        n = self.tree.nodes.new("ShaderNodeVectorMath")
+        n.operation = op
+        n.location = (self.x, -200)
+        self.x += 10
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, (tuple, list, np.ndarray)):
+                n.inputs[i].default_value = [float(c) for c in v]
+            else:
+                self.tree.links.new(v, n.inputs[i])
+        if scale is not None:
+            if isinstance(scale, (int, float)):
+                n.inputs["Scale"].default_value = float(scale)
+            else:
+                self.tree.links.new(scale, n.inputs["Scale"])
+        out = n.outputs["Value"] if op in ("LENGTH", "DOT_PRODUCT") else n.outputs["Vector"]
+        return out
+
+    def smoothstep(self, x):
+        n = self.tree.nodes.new("ShaderNodeMapRange")
+        n.data_type = "FLOAT"
+        n.interpolation_type = "SMOOTHSTEP"
+        n.clamp = True
+        n.location = (self.x, 0)
+        self.x += 10
+        n.inputs["From Min"].default_value = 0.0
+        n.inputs["From Max"].default_value = 1.0
+        n.inputs["To Min"].default_value = 0.0
+        n.inputs["To Max"].default_value = 1.0
+        self.tree.links.new(x, n.inputs["Value"])
+        return n.outputs["Result"]
+
+    def one_minus_cos(self, s):
+        sq = self.math("MULTIPLY", s, s)
+        root = self.math("SQRT", self.math("SUBTRACT", 1.0, sq))
+        return self.math("DIVIDE", sq, self.math("ADD", 1.0, root))
+
+
+def _new_group(name, inputs, outputs, key):
+    from .write import _tag
+    ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    for sock_name, kind in inputs:
+        ng.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind)
+    for sock_name, kind in outputs:
+        ng.interface.new_socket(sock_name, in_out="OUTPUT", socket_type=kind)
+    gin = ng.nodes.new("NodeGroupInput")
+    gout = ng.nodes.new("NodeGroupOutput")
+    _tag(ng, key)
+    return ng, gin, gout
+
+
+# -- lamps -------------------------------------------------------------------------------------
+
+def _area_radius_expression(light):
+    shape = getattr(light, "shape", "SQUARE")
+    if shape == "SQUARE":
+        return f"s * sc / {SQRT_PI!r}"
+    if shape == "RECTANGLE":
+        return f"sqrt(s * t) * sc / {SQRT_PI!r}"
+    if shape == "DISK":
+        return "s * sc / 2"
+    return "sqrt(s * t) * sc / 2"            # ELLIPSE
+
+
+def make_lamp_group(name, key, obj=None, centre=None, radius=0.0):
+    """The node group of lamp ``name``: outputs its world position and radius (driven from the
+    light object ``obj``, or the constants ``centre`` / ``radius`` of an emissive-face lamp)."""
+    ng, gin, gout = _new_group(f"Relight Lamp {name}", [],
+                               [("Position", "NodeSocketVector"), ("Radius", "NodeSocketFloat")],
+                               key)
+    ng[LAMP_KEY] = name
+    ng.use_fake_user = True        # kept when no moving object uses it yet (save, reopen)
+    pos = ng.nodes.new("ShaderNodeCombineXYZ")
+    rad = ng.nodes.new("ShaderNodeValue")
+    ng.links.new(pos.outputs[0], gout.inputs["Position"])
+    ng.links.new(rad.outputs[0], gout.inputs["Radius"])
+    if obj is None or obj.type != "LIGHT":
+        c = np.zeros(3) if centre is None else np.asarray(centre, float)
+        for i in range(3):
+            pos.inputs[i].default_value = float(c[i])
+        rad.outputs[0].default_value = float(radius)
+        return ng
+    light = obj.data
+    if light.type == "SUN":
+        q = _transform_vars(obj, ("ROT_W", "ROT_X", "ROT_Y", "ROT_Z"))
+        d = SUN_DISTANCE
+        exprs = (f"{d!r} * 2 * (rotx * rotz + rotw * roty)",
+                 f"{d!r} * 2 * (roty * rotz - rotw * rotx)",
+                 f"{d!r} * (1 - 2 * (rotx * rotx + roty * roty))")
+        for i, e in enumerate(exprs):
+            _driver(pos.inputs[i], e, q)
+        _driver(rad.outputs[0], f"{d!r} * tan(a / 2)", [("a", "PROP", light, "angle")])
+        return ng
+    for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
+        _driver(pos.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
+    if light.type == "AREA":
+        _driver(rad.outputs[0], _area_radius_expression(light),
+                [("s", "PROP", light, "size"), ("t", "PROP", light, "size_y"),
+                 ("sc", "TRANSFORMS", obj, "SCALE_AVG")])
+    else:
+        _driver(rad.outputs[0], "r", [("r", "PROP", light, "shadow_soft_size")])
+    return ng
+
+
+def emissive_disk(scene_data, k):
+    """(centre, radius) of emissive-face lamp ``k``: the area-weighted centroid of its faces and
+    the disk with the same spread (a uniform disk of radius R has RMS radius R / sqrt 2)."""
+    sel = np.flatnonzero(np.asarray(scene_data.lamp) == k)
+    if len(sel) == 0:
+        return np.zeros(3), 0.0
+    area, _ = scene_data.area_normal()
+    a = np.maximum(area[sel], 0.0)
+    pts = scene_data.corners[sel].mean(axis=1)
+    w = a / max(a.sum(), 1e-300)
+    centre = (pts * w[:, None]).sum(0)
+    rms = float(np.sqrt((w * np.sum((pts - centre) ** 2, axis=1)).sum()))
+    return centre, float(np.sqrt(2.0) * rms)
+
+
+def lamp_groups(key):
+    return {ng[LAMP_KEY]: ng for ng in bpy.data.node_groups
+            if LAMP_KEY in ng and ng.get("relight_scene") == key}
+
+
+# -- objects -----------------------------------------------------------------------------------
+
+def object_triangles(obj, depsgraph):
+    """The evaluated mesh's triangles (t, 3, 3) in the object's own coordinates."""
+    ev = obj.evaluated_get(depsgraph)
+    me = ev.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        nv, nt = len(me.vertices), len(me.loop_triangles)
+        co = np.empty(nv * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        tri = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("vertices", tri)
+    finally:
+        ev.to_mesh_clear()
+    return co.reshape(-1, 3).astype(np.float64)[tri.reshape(-1, 3)]
+
+
+def _fit_hash(tris, n):
+    h = hashlib.sha1(np.ascontiguousarray(tris, np.float32).tobytes())
+    h.update(str(n).encode())
+    return h.hexdigest()
+
+
+def make_sphere_group(obj, centres, radii, key, fit_hash=""):
+    """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)."""
+    ng, gin, gout = _new_group(f"Relight Spheres {obj.name}",
+                               [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
+                                ("Lamp Radius", "NodeSocketFloat")],
+                               [("Visibility", "NodeSocketFloat")], key)
+    ng[OBJECT_KEY] = obj.name
+    ng[FIT_KEY] = fit_hash
+    ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
+    b = _Builder(ng)
+    tree = ng.nodes
+    # The object's world transform, driven: location, conjugate rotation (u, w), 1 / scale.
+    loc = tree.new("ShaderNodeCombineXYZ")
+    for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
+        _driver(loc.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
+    u = tree.new("ShaderNodeCombineXYZ")
+    for i, w in enumerate(("ROT_X", "ROT_Y", "ROT_Z")):
+        _driver(u.inputs[i], "-v", [("v", "TRANSFORMS", obj, w)])
+    w = tree.new("ShaderNodeValue")
+    _driver(w.outputs[0], "v", [("v", "TRANSFORMS", obj, "ROT_W")])
+    inv = tree.new("ShaderNodeCombineXYZ")
+    for i, s in enumerate(("SCALE_X", "SCALE_Y", "SCALE_Z")):
+        _driver(inv.inputs[i], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, s)])
+    inv_avg = tree.new("ShaderNodeValue")
+    _driver(inv_avg.outputs[0], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, "SCALE_AVG")])
+
+    def local(v):   # R^T (v - loc) / scale: the quaternion's conjugate rotates back
+        d = b.vmath("SUBTRACT", v, loc.outputs[0])
+        t = b.vmath("SCALE", b.vmath("CROSS_PRODUCT", u.outputs[0], d), scale=2.0)
+        r = b.vmath("ADD", b.vmath("ADD", d, b.vmath("SCALE", t, scale=w.outputs[0])),
+                    b.vmath("CROSS_PRODUCT", u.outputs[0], t))
+        return b.vmath("MULTIPLY", r, inv.outputs[0])
+
+    p = local(gin.outputs["Position"])
+    lamp = local(gin.outputs["Lamp"])
+    r_l = b.math("MULTIPLY", gin.outputs["Lamp Radius"], inv_avg.outputs[0])
+    to_l = b.vmath("SUBTRACT", lamp, p)
+    d_l = b.vmath("LENGTH", to_l)
+    s_l = b.math("MINIMUM", b.math("DIVIDE", r_l, d_l), 1.0)
+    th_l = b.math("ARCSINE", s_l)
+    om_l = b.math("MAXIMUM", b.one_minus_cos(s_l), 1e-30)
+    acc = None
+    for c, r in zip(centres, radii):
+        to_c = b.vmath("SUBTRACT", tuple(c), p)
+        d_c = b.vmath("LENGTH", to_c)
+        cos_g = b.math("DIVIDE", b.vmath("DOT_PRODUCT", to_l, to_c), b.math("MULTIPLY", d_l, d_c))
+        gamma = b.math("ARCCOSINE", b.math("MAXIMUM", b.math("MINIMUM", cos_g, 1.0), -1.0))
+        s_o = b.math("MINIMUM", b.math("DIVIDE", float(r), d_c), 1.0)
+        th_o = b.math("ARCSINE", s_o)
+        ratio = b.math("MINIMUM", b.math("DIVIDE", b.one_minus_cos(s_o), om_l), 1.0)
+        width = b.math("MAXIMUM", b.math("MULTIPLY", b.math("MINIMUM", th_l, th_o), 2.0),
+                       EPS_ANGLE)
+        x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
+        blocked = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
+                         b.math("LESS_THAN", d_c, d_l))
+        v = b.math("SUBTRACT", 1.0, blocked)
+        acc = v if acc is None else b.math("MULTIPLY", acc, v)
+    if acc is None:
+        acc = b.math("ADD", 1.0, 0.0)
+    ng.links.new(acc, gout.inputs["Visibility"])
+    return ng
+
+
+def group_spheres(ng):
+    """(centres (m, 3), radii (m,)) stored on a sphere group, in its object's frame."""
+    a = np.asarray(ng.get(SPHERES_KEY, []), float).reshape(-1, 4)
+    return a[:, :3], a[:, 3]
+
+
+def _sphere_groups(key):
+    return {ng[OBJECT_KEY]: ng for ng in bpy.data.node_groups
+            if OBJECT_KEY in ng and ng.get("relight_scene") == key}
+
+
+# -- materials ---------------------------------------------------------------------------------
+
+def _lamp_terms(mat):
+    """(lamp name, its map node, its shadow factor node) of a relit material."""
+    from .write import MAP_PREFIX, SHADOW_PREFIX
+    nodes = mat.node_tree.nodes
+    out = []
+    for node in nodes:
+        if node.name.startswith(SHADOW_PREFIX):
+            lname = node.name[len(SHADOW_PREFIX):]
+            m = nodes.get(MAP_PREFIX + lname)
+            if m is not None:
+                out.append((lname, m, node))
+    return out
+
+
+def _wire_material(mat, lamp_group_of, sphere_groups):
+    tree = mat.node_tree
+    for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
+        tree.nodes.remove(node)
+    terms = _lamp_terms(mat)
+    for _, _, s_node in terms:
+        for link in list(s_node.inputs["Scale"].links):
+            tree.links.remove(link)
+        s_node.inputs["Scale"].default_value = 1.0
+    if not sphere_groups or not terms:
+        return 0
+    count = 0
+
+    def node(kind, label, loc):
+        nonlocal count
+        n = tree.nodes.new(kind)
+        count += 1
+        n.name = n.label = f"{NODE_PREFIX} {label} {count}"
+        n.location = loc
+        return n
+
+    x0 = min(t[2].location.x for t in terms) - 900
+    geo = node("ShaderNodeNewGeometry", "Position", (x0, 200))
+    for j, (lname, m_node, s_node) in enumerate(terms):
+        lg = lamp_group_of.get(lname)
+        if lg is None:
+            continue
+        y = s_node.location.y - 60
+        lamp = node("ShaderNodeGroup", f"Lamp {lname}", (x0, y))
+        lamp.node_tree = lg
+        vis = None
+        for i, sg in enumerate(sphere_groups):
+            g = node("ShaderNodeGroup", f"Spheres {sg[OBJECT_KEY]}", (x0 + 200, y - 120 * i))
+            g.node_tree = sg
+            tree.links.new(geo.outputs["Position"], g.inputs["Position"])
+            tree.links.new(lamp.outputs["Position"], g.inputs["Lamp"])
+            tree.links.new(lamp.outputs["Radius"], g.inputs["Lamp Radius"])
+            if vis is None:
+                vis = g.outputs[0]
+            else:
+                mul = node("ShaderNodeMath", "Product", (x0 + 400, y - 120 * i))
+                mul.operation = "MULTIPLY"
+                tree.links.new(vis, mul.inputs[0])
+                tree.links.new(g.outputs[0], mul.inputs[1])
+                vis = mul.outputs[0]
+        # 1 - a (1 - V): only the direct part (the map's alpha) is shadowed
+        lost = node("ShaderNodeMath", "Lost", (x0 + 560, y))
+        lost.operation = "SUBTRACT"
+        lost.inputs[0].default_value = 1.0
+        tree.links.new(vis, lost.inputs[1])
+        part = node("ShaderNodeMath", "Direct part", (x0 + 700, y))
+        part.operation = "MULTIPLY"
+        tree.links.new(m_node.outputs["Alpha"], part.inputs[0])
+        tree.links.new(lost.outputs[0], part.inputs[1])
+        keep = node("ShaderNodeMath", "Factor", (x0 + 840, y))
+        keep.operation = "SUBTRACT"
+        keep.inputs[0].default_value = 1.0
+        tree.links.new(part.outputs[0], keep.inputs[1])
+        tree.links.new(keep.outputs[0], s_node.inputs["Scale"])
+    return 1
+
+
+def sync(scene, depsgraph=None, seed=0) -> dict:
+    """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
+    (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
+    no longer moving, and wire every relit material.  Returns a summary."""
+    from .write import _ours, scene_key
+    key = scene_key(scene)
+    if key is None:
+        return {"objects": 0, "fitted": 0, "materials": 0}
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    groups = _sphere_groups(key)
+    wanted, fitted = [], 0
+    for obj in moving_objects(scene):
+        n = sphere_count(obj)
+        tris = object_triangles(obj, depsgraph)
+        if len(tris) == 0:
+            continue
+        h = _fit_hash(tris, n)
+        old = groups.pop(obj.name, None)
+        if old is not None and old.get(FIT_KEY) == h:
+            wanted.append(old)
+            continue
+        if old is not None:
+            bpy.data.node_groups.remove(old)
+        centres, radii = fit_spheres(tris, n, seed)
+        wanted.append(make_sphere_group(obj, centres, radii, key, h))
+        fitted += 1
+    for stale in groups.values():
+        bpy.data.node_groups.remove(stale)
+    lamps = lamp_groups(key)
+    mats = [m for m in bpy.data.materials if _ours(m, key) and m.node_tree is not None]
+    wired = sum(_wire_material(m, lamps, wanted) for m in mats)
+    return {"objects": len(wanted), "fitted": fitted, "materials": wired}

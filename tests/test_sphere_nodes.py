@@ -1,0 +1,336 @@
+"""Moving virtual objects (issue 11): sphere shadows evaluated by the relit materials.
+
+The closed test room of test_precompute_operator (six textured walls, a box, two area lamps),
+precomputed at draft; Suzanne, Relight Role "virtual" with Moving shadows, above the floor.
+
+* The node groups compute what their numpy twin (core/relight/sphere_shadow.py) computes: the
+  floor is baked by Cycles (EMIT) with and without the shadow factor and with its world
+  positions, and the ratio is compared texel by texel with 1 - a (1 - V) from the twin.
+* The saved .blend renders the keyframed object's moving shadow in a fresh process where the
+  extension is not loaded and Python auto-run is off (only simple-expression drivers run), at
+  two frames, where the twin says the shadow is.
+* Through the operators: Update fits a new object, follows a new sphere count, and a deleted
+  object's shadow goes away; save and reopen keep the groups.
+"""
+import importlib
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from test_precompute_operator import PKG, _addon, build_scene  # noqa: E402
+from relight_addon.core.relight.sphere_shadow import sphere_visibility, to_local  # noqa: E402
+
+BAKE = 32          # texels of the floor bakes
+FRAMES = {1: (-0.9, -0.6, 0.9), 20: (0.8, -0.9, 0.7)}
+
+
+def _nodes():
+    return importlib.import_module(PKG + ".relight_addon.blender.sphere_nodes")
+
+
+def _monkey(spheres=8, location=(-0.9, -0.6, 0.9)):
+    bpy.ops.mesh.primitive_monkey_add(location=location, size=0.9)
+    obj = bpy.context.active_object
+    obj.name = "Monkey"
+    obj.rotation_euler = (0.3, 0.0, 0.7)
+    obj.relight_role = "virtual"
+    obj.relight_shadows = "SPHERES"
+    obj.relight_spheres = spheres
+    bpy.context.view_layer.update()
+    return obj
+
+
+@pytest.fixture(scope="module")
+def room():
+    _addon()
+    build_scene()
+    bpy.context.scene.relight.preset = "draft"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    return monkey
+
+
+def _bake(obj, mat):
+    """Cycles EMIT bake of ``obj`` with ``mat`` in its first slot: (BAKE, BAKE, 4)."""
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 1
+    old = obj.material_slots[0].material
+    obj.material_slots[0].material = mat
+    img = bpy.data.images.new("sphere_test_bake", BAKE, BAKE, float_buffer=True)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    mat.node_tree.nodes.active = tex
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    try:
+        assert bpy.ops.object.bake(type="EMIT") == {"FINISHED"}
+        px = np.empty(BAKE * BAKE * 4, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        mat.node_tree.nodes.remove(tex)
+        bpy.data.images.remove(img)
+        obj.material_slots[0].material = old
+    return px.reshape(BAKE, BAKE, 4)
+
+
+def _emit_material(name, source):
+    """A material emitting what ``source(tree)`` returns (a socket)."""
+    mat = bpy.data.materials.new(name)
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    emit = nt.nodes.new("ShaderNodeEmission")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(source(nt), emit.inputs["Color"])
+    nt.links.new(emit.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _position_material():
+    return _emit_material("sphere_test_position",
+                          lambda nt: nt.nodes.new("ShaderNodeNewGeometry").outputs["Position"])
+
+
+def _alpha_material(image):
+    """Emits the alpha of ``image`` as the relit material samples it (UV, linear)."""
+    def source(nt):
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        return tex.outputs["Alpha"]
+    return _emit_material("sphere_test_alpha", source)
+
+
+def _alpha(img):
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(img.size[1], img.size[0], 4)[..., 3]
+
+
+def _lamp_radius(obj):
+    return obj.data.size * float(np.mean(obj.scale)) / np.sqrt(np.pi)     # square area light
+
+
+def test_node_groups_match_their_numpy_twin(room):
+    monkey = room
+    floor = bpy.data.objects["Floor"]
+    mat = floor.material_slots[0].material
+    assert mat.name.endswith(".relight")
+    # every driver is a simple expression: it runs with auto-run off, without the extension
+    for ng in bpy.data.node_groups:
+        for fc in (ng.animation_data.drivers if ng.animation_data else ()):
+            assert fc.driver.is_simple_expression, (ng.name, fc.driver.expression)
+    group = next(g for g in bpy.data.node_groups if g.get(_nodes().OBJECT_KEY) == "Monkey")
+    centres, radii = _nodes().group_spheres(group)
+    assert len(centres) == 8
+    pos = _position_material()
+    P = _bake(floor, pos)[..., :3].reshape(-1, 3)
+    lamps = {n: bpy.data.objects[n] for n in ("LampA", "LampB")}
+    powers = {n: o.data.energy for n, o in lamps.items()}
+    try:
+        for name, lamp in lamps.items():
+            for other in lamps:                       # this lamp alone (the drivers follow)
+                lamps[other].data.energy = powers[other] if other == name else 0.0
+            bpy.context.view_layer.update()
+            shadowed = _bake(floor, mat)[..., 0].reshape(-1)
+            s_input = mat.node_tree.nodes[f"S {name}"].inputs["Scale"]
+            link = s_input.links[0]
+            src = link.from_socket
+            mat.node_tree.links.remove(link)
+            plain = _bake(floor, mat)[..., 0].reshape(-1)
+            mat.node_tree.links.new(src, s_input)
+            m_image = mat.node_tree.nodes[f"M {name}"].image
+            assert _alpha(m_image).shape == (16, 16)
+            a = _bake(floor, _alpha_material(m_image))[..., 0].reshape(-1)   # as shaded
+            M = np.array(monkey.matrix_world)
+            V = sphere_visibility(to_local(P, M), to_local(np.array(lamp.location)[None], M)[0],
+                                  _lamp_radius(lamp) / float(np.mean(monkey.scale)),
+                                  centres, radii)
+            lit = plain > 1e-4
+            got = shadowed[lit] / plain[lit]
+            pred = (1 - a * (1 - V))[lit]
+            print(f"{name}: {int((V < 0.5).sum())} texels in umbra, alpha {a.min():.3f}-"
+                  f"{a.max():.3f}, |bake - twin| max {np.abs(got - pred).max():.2e}")
+            assert (V < 0.5).sum() >= 5 and (V > 0.99).sum() >= 100
+            assert a.min() < 0.97           # indirect light: a part of the map is not shadowed
+            assert np.abs(got - pred).max() < 0.02
+            assert np.isfinite(shadowed).all()
+    finally:
+        for n, o in lamps.items():
+            o.data.energy = powers[n]
+
+
+FARM = r"""
+import json, sys
+import bpy
+import numpy as np
+bpy.context.preferences.filepaths.use_scripts_auto_execute = False
+bpy.ops.wm.open_mainfile(filepath=sys.argv[-2], load_ui=False)
+assert "relight_ext" not in sys.modules and not bpy.app.driver_namespace.keys() & {"relight"}
+scene = bpy.context.scene
+
+
+def render(tag):
+    scene.render.filepath = f"{sys.argv[-1]}_{tag}.exr"
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(img.size[1], img.size[0], 4)[..., :3].sum(-1)
+
+
+def shadow_links(on, saved={}):
+    for mat in bpy.data.materials:
+        if not mat.get("relight_generated"):
+            continue
+        for node in mat.node_tree.nodes:
+            if node.name.startswith("S "):
+                sock = node.inputs["Scale"]
+                if not on and sock.is_linked:
+                    saved[(mat.name, node.name)] = sock.links[0].from_socket
+                    mat.node_tree.links.remove(sock.links[0])
+                elif on and (mat.name, node.name) in saved:
+                    mat.node_tree.links.new(saved[(mat.name, node.name)], sock)
+
+
+out = {}
+engines = [("cycles", "CYCLES")] + [("eevee", e) for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
+                                    if e in {i.identifier for i in type(scene.render).bl_rna
+                                             .properties["engine"].enum_items}][:1]
+for frame in (1, 20):
+    scene.frame_set(frame)
+    for tag, engine in engines if frame == 20 else engines[:1]:
+        scene.render.engine = engine
+        shadowed = render(f"{tag}{frame}")
+        shadow_links(False)
+        plain = render(f"{tag}{frame}_plain")
+        shadow_links(True)
+        ratio = np.where(plain > 1e-4, shadowed / np.maximum(plain, 1e-4), 1.0)
+        out[f"{tag}{frame}"] = {"ratio": ratio.tolist(),
+                                "matrix": [list(r) for r in bpy.data.objects["Monkey"].matrix_world]}
+print("FARM" + json.dumps(out))
+"""
+
+
+def _camera_over_floor(size):
+    scene = bpy.context.scene
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.0, 0.0, 2.9)
+    cam.rotation_euler = (0.0, 0.0, 0.0)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 4.0
+    cam.data.clip_end = 10.0
+    scene.render.resolution_x = scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 16
+    scene.cycles.use_denoising = False
+    scene.cycles.max_bounces = 0
+    scene.render.filter_size = 0.01
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    # the box and the ceiling are not in the picture; the object itself is not seen either
+    # (its shadow is what is measured)
+    for name in ("Box", "Monkey", "Ceiling"):
+        bpy.data.objects[name].visible_camera = False
+
+
+def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, tmp_path):
+    monkey = room
+    size = 32
+    _camera_over_floor(size)
+    for frame, loc in FRAMES.items():
+        monkey.location = loc
+        monkey.keyframe_insert("location", frame=frame)
+    path = str(tmp_path / "moving.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    proc = subprocess.run([sys.executable, "-c", FARM, path, str(tmp_path / "frame")],
+                          capture_output=True, text=True, timeout=600)
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("FARM")]
+    assert line, proc.stdout[-2000:] + proc.stderr[-2000:]
+    frames = json.loads(line[0][4:])
+    # the floor under each pixel (rows bottom-up: y grows with the row), and the twin's umbra
+    g = (np.arange(size) + 0.5) / size * 4.0 - 2.0
+    X, Y = np.meshgrid(g, g)
+    pts = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    group = next(gr for gr in bpy.data.node_groups if gr.get(_nodes().OBJECT_KEY) == "Monkey")
+    centres, radii = _nodes().group_spheres(group)
+    centroids = {}
+    for tag, data in frames.items():
+        ratio = np.asarray(data["ratio"])
+        M = np.asarray(data["matrix"])
+        dark = np.ones(size * size)
+        for name in ("LampA", "LampB"):
+            lamp = bpy.data.objects[name]
+            V = sphere_visibility(to_local(pts, M),
+                                  to_local(np.array(lamp.location)[None], M)[0],
+                                  _lamp_radius(lamp) / float(np.mean(monkey.scale)), centres,
+                                  radii)
+            dark = np.minimum(dark, V)
+        want = (dark < 0.3).reshape(size, size)
+        got = ratio < 0.85
+        overlap = (want & got).sum() / max(want.sum(), 1)
+        print(f"{tag}: twin umbra {int(want.sum())} px, rendered shadow {int(got.sum())} px, "
+              f"overlap {overlap:.2f}, darkest {ratio.min():.2f}")
+        assert np.isfinite(ratio).all() and ratio.max() < 1.01
+        assert want.sum() >= 3 and overlap >= 0.8
+        yy, xx = np.nonzero(want)
+        centroids[tag] = (xx.mean(), yy.mean())
+    (x1, y1), (x2, y2) = centroids["cycles1"], centroids["cycles20"]
+    assert np.hypot(x2 - x1, y2 - y1) > 5           # the shadow moved with the object
+    if "eevee20" in frames:                          # EEVEE shows the same shadow
+        diff = np.abs(np.asarray(frames["eevee20"]["ratio"]) - np.asarray(frames["cycles20"]["ratio"]))
+        print(f"EEVEE vs Cycles ratio: mean {diff.mean():.3f}, max {diff.max():.3f}")
+        assert diff.mean() < 0.02
+
+
+def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_path):
+    monkey = room
+    sn = _nodes()
+    floor_mat = bpy.data.objects["Floor"].material_slots[0].material
+
+    def group():
+        return next((g for g in bpy.data.node_groups if g.get(sn.OBJECT_KEY) == "Monkey"), None)
+
+    assert floor_mat.node_tree.nodes["S LampA"].inputs["Scale"].is_linked
+    monkey.relight_spheres = 12
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert len(sn.group_spheres(group())[1]) == 12
+    # a drag: nothing to fit again, the drivers follow the transform
+    fit = group()[sn.FIT_KEY]
+    monkey.location.x += 0.3
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert group()[sn.FIT_KEY] == fit
+    # save and reopen: the groups and the wiring are kept
+    for im in bpy.data.images:          # the test room's photos are generated images
+        if im.packed_file is None and im.has_data:
+            im.pack()
+    path = str(tmp_path / "kept.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    floor_mat = bpy.data.objects["Floor"].material_slots[0].material
+    assert group() is not None and floor_mat.node_tree.nodes["S LampB"].inputs["Scale"].is_linked
+    assert any(g.get(sn.LAMP_KEY) == "LampA" for g in bpy.data.node_groups)
+    # deleted: Update takes its shadow away (the maps stay as they were: no solve)
+    bpy.data.objects.remove(bpy.data.objects["Monkey"])
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert group() is None
+    assert not floor_mat.node_tree.nodes["S LampA"].inputs["Scale"].is_linked
+    # Clear removes the lamp groups too
+    assert bpy.ops.relight.clear() == {"FINISHED"}
+    assert not [g for g in bpy.data.node_groups if g.get("relight_generated")]
