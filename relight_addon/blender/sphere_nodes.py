@@ -321,6 +321,7 @@ def make_sphere_group(obj, centres, radii, key, fit_hash=""):
         x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
         blocked = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
                          b.math("LESS_THAN", d_c, d_l))
+        blocked = b.math("MAXIMUM", blocked, b.math("LESS_THAN", d_c, float(r)))
         v = b.math("SUBTRACT", 1.0, blocked)
         acc = v if acc is None else b.math("MULTIPLY", acc, v)
     if acc is None:

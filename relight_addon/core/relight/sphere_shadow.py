@@ -10,7 +10,8 @@ caps' overlap approximated as in ambient aperture lighting (Oat and Sander 2007)
                                                        / (theta_L + theta_O - |theta_L - theta_O|))
 
 (exact when one cap holds the other or they are apart, a smooth ramp between), Omega = 2 pi
-(1 - cos theta).  Spheres farther than the lamp do not shadow it, and the spheres of a set
+(1 - cos theta).  Spheres farther than the lamp do not shadow it, a receiver inside a sphere
+(inside the object, e.g. where it rests on the floor) sees none of it, and the spheres of a set
 combine multiplicatively, as the issue and Iwanicki (2013) do.  The cosine over the lamp's cap
 and the lamp's shape (a rectangle is taken as the disk of the same area) are ignored: the
 approximation's error against ray-traced shadows of the real mesh is measured in
@@ -57,6 +58,7 @@ def cap_visibility(points, lamp_pos, lamp_radius, centre, radius):
     blocked = (np.minimum(om_o / np.maximum(om_l, 1e-30), 1.0)
                * smoothstep((th_l + th_o - gamma) / width))
     blocked = np.where(d_c < d_l, blocked, 0.0)          # a sphere behind the lamp
+    blocked = np.where(d_c < radius, 1.0, blocked)       # a receiver inside the object
     return np.clip(1.0 - blocked, 0.0, 1.0)
 
 
