@@ -683,22 +683,27 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 if role == "occluder":
                     continue
                 obj_rho[sel] = np.clip(info.rho, 0.0, RHO_MAX)
-                if role == "virtual":   # not in the photo: no texels, its material's colour
-                    continue
                 if np.any(info.emission_radiance > 0):
+                    # A virtual emissive mesh is a lamp that is off in the photo (intensity 0):
+                    # it gets its map like any lamp, and its light is added at render time.
+                    in_photo = role != "virtual"
                     key = (label, mkey)
                     if key not in emissive_lamp:
                         emissive_lamp[key] = len(lamp_names)
                         lamp_names.append(f"{label}/{mkey}")
-                        lamp_intensity.append(1.0)
+                        lamp_intensity.append(1.0 if in_photo else 0.0)
                         report.lamp_sources.append({"name": f"{label}/{mkey}", "object": obj.name,
                                                     "material": mkey, "kind": "emissive",
-                                                    "power_photo": 1.0, "power_ref": 1.0})
+                                                    "virtual_mesh": not in_photo,
+                                                    "power_photo": 1.0 if in_photo else 0.0,
+                                                    "power_ref": 1.0})
                         report.lamps += 1
                     obj_lamp[sel] = emissive_lamp[key]
                     obj_em[sel] = np.pi * info.emission_radiance
                     obj_two_sided[sel] = info.two_sided
                     report.emissive_faces += int(sel.sum())
+                if role == "virtual":   # not in the photo: no texels, its material's colour
+                    continue
                 layer = _uv_layer(me, info.uv_map)
                 if layer is None:
                     if info.image_node is not None:
@@ -728,7 +733,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             group.append(obj_group)
             uvs.append(obj_uv)
             image_idx.append(obj_img)
-            virtual_patch.append(np.full(p, role == "virtual"))
+            # (a virtual mesh's emissive faces are lamp patches, not a virtual object's)
+            virtual_patch.append((role == "virtual") & (obj_lamp < 0))
             # Cycles' mesh emission is two-sided: the back of an emissive face emits too (a
             # copy facing the other way; the front already blocks rays).
             em = np.flatnonzero((obj_lamp >= 0) & obj_two_sided)

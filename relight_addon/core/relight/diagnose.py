@@ -72,8 +72,10 @@ def _point_triangle_distance(p, tris):
 
 def lamp_clearance(scene, lamp):
     """Distance (m) from lamp ``lamp`` (its patches' corners and centres, or its light's
-    centre, minus the light's radius) to the nearest occluding surface."""
-    tris = scene.occluder_triangles()
+    centre, minus the light's radius) to the nearest occluding surface other than its own (an
+    emissive mesh's faces block light too)."""
+    c = scene.corners[scene.occluder & (scene.lamp != lamp)]
+    tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]])
     if len(tris) == 0:
         return np.inf
     pts = []
