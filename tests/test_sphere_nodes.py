@@ -134,7 +134,7 @@ def test_node_groups_match_their_numpy_twin(room):
         for fc in (ng.animation_data.drivers if ng.animation_data else ()):
             assert fc.driver.is_simple_expression, (ng.name, fc.driver.expression)
     group = next(g for g in bpy.data.node_groups if g.get(_nodes().OBJECT_KEY) == "Monkey")
-    centres, radii = _nodes().group_spheres(group)
+    centres, radii, hull = _nodes().group_spheres(group)
     assert len(centres) == 8
     pos = _position_material()
     P = _bake(floor, pos)[..., :3].reshape(-1, 3)
@@ -158,7 +158,7 @@ def test_node_groups_match_their_numpy_twin(room):
             M = np.array(monkey.matrix_world)
             V = sphere_visibility(to_local(P, M), to_local(np.array(lamp.location)[None], M)[0],
                                   _lamp_radius(lamp) / float(np.mean(monkey.scale)),
-                                  centres, radii)
+                                  centres, radii, hull)
             lit = plain > 1e-4
             got = shadowed[lit] / plain[lit]
             pred = (1 - a * (1 - V))[lit]
@@ -274,7 +274,7 @@ def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, 
     X, Y = np.meshgrid(g, g)
     pts = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
     group = next(gr for gr in bpy.data.node_groups if gr.get(_nodes().OBJECT_KEY) == "Monkey")
-    centres, radii = _nodes().group_spheres(group)
+    centres, radii, hull = _nodes().group_spheres(group)
     moved = {}
     for tag, data in frames.items():
         name = tag[-5:]
@@ -282,7 +282,8 @@ def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, 
         ratio = np.asarray(data["ratio"]).reshape(-1)
         M = np.asarray(data["matrix"])
         V = sphere_visibility(to_local(pts, M), to_local(np.array(lamp.location)[None], M)[0],
-                              _lamp_radius(lamp) / float(np.mean(monkey.scale)), centres, radii)
+                              _lamp_radius(lamp) / float(np.mean(monkey.scale)), centres, radii,
+                              hull)
         umbra, lit = V < 0.3, V > 0.999
         print(f"{tag}: twin umbra {int(umbra.sum())} px, rendered ratio there "
               f"{ratio[umbra].mean():.2f}, where the twin sees the lamp {np.median(ratio[lit]):.3f}")
@@ -316,7 +317,7 @@ def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_pat
     assert floor_mat.node_tree.nodes["S LampA"].inputs["Scale"].is_linked
     monkey.relight_spheres = 12
     assert bpy.ops.relight.update() == {"FINISHED"}
-    assert len(sn.group_spheres(group())[1]) == 12
+    assert len(sn.group_spheres(group())[1]) == 12 and sn.group_spheres(group())[2] is not None
     # a drag: nothing to fit again, the drivers follow the transform
     fit = group()[sn.FIT_KEY]
     monkey.location.x += 0.3

@@ -11,7 +11,7 @@ import pytest
 
 from relight_addon.core.relight.sphere_shadow import (
     SUN_DISTANCE, cap_visibility, sphere_visibility, sun_disk, to_local)
-from relight_addon.core.relight.spheres import fit_spheres
+from relight_addon.core.relight.spheres import fit_spheres, silhouette_sphere
 
 
 # ------------------------------------------------------------------------------------------
@@ -324,3 +324,36 @@ def test_receiver_inside_a_sphere_sees_nothing():
     lamp = np.array([0, 0, 5.0])
     p = np.array([[0, 0, 1.0], [0, 0, 1.5], [0.3, 0, 1.2]])
     assert np.all(cap_visibility(p, lamp, 0.2, np.array([0, 0, 1.0]), 1.0) == 0.0)
+
+
+def test_silhouette_rule_counts_less_twice_what_aligned_spheres_hide():
+    """Two spheres one behind the other subtend the same cap from the receiver: together they
+    hide exactly what one hides.  The plain product counts it twice; the silhouette rule (the
+    spheres independent within the part of the lamp the object can hide) much less."""
+    p = np.zeros((1, 3))
+    lamp, lamp_r = np.array([0, 0, 4.0]), 1.5                    # a large lamp
+    centres, radii = np.array([[0, 0, 1.0], [0, 0, 2.0]]), np.array([0.2, 0.4])
+    one = 1 - cap_visibility(p, lamp, lamp_r, centres[0], radii[0])[0]
+    prod = 1 - sphere_visibility(p, lamp, lamp_r, centres, radii)[0]
+    hull = (centres[0], 0.22)            # a silhouette a little larger than their common cap
+    rule = 1 - sphere_visibility(p, lamp, lamp_r, centres, radii, hull)[0]
+    assert prod == pytest.approx(1 - (1 - one) ** 2)
+    assert one <= rule < prod and (rule - one) < 0.5 * (prod - one)
+
+
+def test_silhouette_sphere_of_a_cube():
+    """Cauchy: a convex body's mean projected area is a quarter of its surface area (a unit
+    cube: 1.5, so pi r^2 = 1.5); centred on the cube's centre."""
+    c, r = silhouette_sphere(box([1, 2, 3], [2, 3, 4]))
+    assert np.allclose(c, [1.5, 2.5, 3.5]) and np.pi * r * r == pytest.approx(1.5)
+
+
+def test_silhouette_rule_agrees_with_the_product_for_a_small_lamp():
+    rng = np.random.default_rng(4)
+    p = np.column_stack([rng.uniform(-1, 1, 400), rng.uniform(-1, 1, 400), np.zeros(400)])
+    centres = rng.normal(0, 0.15, (8, 3)) + [0, 0, 1.0]
+    radii = rng.uniform(0.05, 0.15, 8)
+    hull = (np.array([0, 0, 1.0]), 0.3)
+    a = sphere_visibility(p, [0.3, 0, 3.0], 0.01, centres, radii)
+    b = sphere_visibility(p, [0.3, 0, 3.0], 0.01, centres, radii, hull)
+    assert np.abs(a - b).max() < 0.02 and (a < 0.5).sum() > 10

@@ -28,12 +28,13 @@ import bpy
 import numpy as np
 
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
-from ..core.relight.spheres import fit_spheres
+from ..core.relight.spheres import fit_spheres, silhouette_sphere
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (object frame)
+HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
 SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPHERES"
 COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
@@ -266,7 +267,7 @@ def _fit_hash(tris, n):
     return h.hexdigest()
 
 
-def make_sphere_group(obj, centres, radii, key, fit_hash=""):
+def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)."""
     ng, gin, gout = _new_group(f"Relight Spheres {obj.name}",
                                [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
@@ -275,6 +276,8 @@ def make_sphere_group(obj, centres, radii, key, fit_hash=""):
     ng[OBJECT_KEY] = obj.name
     ng[FIT_KEY] = fit_hash
     ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
+    if hull is not None:
+        ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
     b = _Builder(ng)
     tree = ng.nodes
     # The object's world transform, driven: location, conjugate rotation (u, w), 1 / scale.
@@ -307,8 +310,7 @@ def make_sphere_group(obj, centres, radii, key, fit_hash=""):
     s_l = b.math("MINIMUM", b.math("DIVIDE", r_l, d_l), 1.0)
     th_l = b.math("ARCSINE", s_l)
     om_l = b.math("MAXIMUM", b.one_minus_cos(s_l), 1e-30)
-    acc = None
-    for c, r in zip(centres, radii):
+    def blocked_by(c, r):      # the part of the lamp one sphere hides (cap_visibility's 1 - V)
         to_c = b.vmath("SUBTRACT", tuple(c), p)
         d_c = b.vmath("LENGTH", to_c)
         cos_g = b.math("DIVIDE", b.vmath("DOT_PRODUCT", to_l, to_c), b.math("MULTIPLY", d_l, d_c))
@@ -319,11 +321,30 @@ def make_sphere_group(obj, centres, radii, key, fit_hash=""):
         width = b.math("MAXIMUM", b.math("MULTIPLY", b.math("MINIMUM", th_l, th_o), 2.0),
                        EPS_ANGLE)
         x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
-        blocked = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
-                         b.math("LESS_THAN", d_c, d_l))
-        blocked = b.math("MAXIMUM", blocked, b.math("LESS_THAN", d_c, float(r)))
-        v = b.math("SUBTRACT", 1.0, blocked)
-        acc = v if acc is None else b.math("MULTIPLY", acc, v)
+        out = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
+                     b.math("LESS_THAN", d_c, d_l))
+        return b.math("MAXIMUM", out, b.math("LESS_THAN", d_c, float(r)))
+
+    parts = [blocked_by(c, r) for c, r in zip(centres, radii)]
+    if hull is None:           # the plain product
+        acc = None
+        for part in parts:
+            v = b.math("SUBTRACT", 1.0, part)
+            acc = v if acc is None else b.math("MULTIPLY", acc, v)
+    else:                      # independent within the part S the silhouette can hide
+        s_eff = blocked_by(hull[0], hull[1])
+        for part in parts:
+            s_eff = b.math("MAXIMUM", s_eff, part)
+        s_eff = b.math("MAXIMUM", s_eff, 1e-6)
+        prod = None
+        for part in parts:
+            v = b.math("SUBTRACT", 1.0, b.math("MINIMUM", b.math("DIVIDE", part, s_eff), 1.0))
+            prod = v if prod is None else b.math("MULTIPLY", prod, v)
+        if prod is not None:
+            acc = b.math("SUBTRACT", 1.0,
+                         b.math("MULTIPLY", s_eff, b.math("SUBTRACT", 1.0, prod)))
+        else:
+            acc = None
     if acc is None:
         acc = b.math("ADD", 1.0, 0.0)
     ng.links.new(acc, gout.inputs["Visibility"])
@@ -331,9 +352,12 @@ def make_sphere_group(obj, centres, radii, key, fit_hash=""):
 
 
 def group_spheres(ng):
-    """(centres (m, 3), radii (m,)) stored on a sphere group, in its object's frame."""
+    """(centres (m, 3), radii (m,), hull (centre, radius) or None) stored on a sphere group, in
+    its object's frame."""
     a = np.asarray(ng.get(SPHERES_KEY, []), float).reshape(-1, 4)
-    return a[:, :3], a[:, 3]
+    h = ng.get(HULL_KEY)
+    hull = None if h is None else (np.asarray(h[:3], float), float(h[3]))
+    return a[:, :3], a[:, 3], hull
 
 
 def _sphere_groups(key):
@@ -443,7 +467,7 @@ def sync(scene, depsgraph=None, seed=0) -> dict:
         if old is not None:
             bpy.data.node_groups.remove(old)
         centres, radii = fit_spheres(tris, n, seed)
-        wanted.append(make_sphere_group(obj, centres, radii, key, h))
+        wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris)))
         fitted += 1
     for stale in groups.values():
         bpy.data.node_groups.remove(stale)

@@ -12,7 +12,8 @@ caps' overlap approximated as in ambient aperture lighting (Oat and Sander 2007)
 (exact when one cap holds the other or they are apart, a smooth ramp between), Omega = 2 pi
 (1 - cos theta).  Spheres farther than the lamp do not shadow it, a receiver inside a sphere
 (inside the object, e.g. where it rests on the floor) sees none of it, and the spheres of a set
-combine multiplicatively, as the issue and Iwanicki (2013) do.  The cosine over the lamp's cap
+combine multiplicatively (as the issue and Iwanicki 2013 do) within the part of the lamp the
+object's silhouette can hide (see sphere_visibility).  The cosine over the lamp's cap
 and the lamp's shape (a rectangle is taken as the disk of the same area) are ignored: the
 approximation's error against ray-traced shadows of the real mesh is measured in
 benchmarks/bench_sphere_shadow.py.
@@ -62,12 +63,28 @@ def cap_visibility(points, lamp_pos, lamp_radius, centre, radius):
     return np.clip(1.0 - blocked, 0.0, 1.0)
 
 
-def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii):
-    """Fraction (n,) of the lamp seen from ``points`` past every sphere (product over them)."""
-    v = np.ones(len(points))
-    for c, r in zip(np.asarray(centres, float), np.asarray(radii, float)):
-        v *= cap_visibility(points, lamp_pos, lamp_radius, c, r)
-    return v
+def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull=None):
+    """Fraction (n,) of the lamp seen from ``points`` past every sphere.
+
+    Without ``hull``: the product over the spheres.  With ``hull`` = (centre, radius), a sphere
+    whose silhouette stands for the object's (spheres.silhouette_sphere): the spheres' blocked
+    parts b_i are taken as independent *within the part S of the lamp that the object can hide*
+    (S = the larger of the hull's blocked part and every b_i), B = S (1 - prod(1 - b_i / S)).
+    Near and far spheres of a thick object hide the same part of a large lamp; the plain product
+    counts it twice (measured: up to +40 % of missing light at 128 spheres).  For a small lamp S
+    is 0 or 1 and the two rules agree."""
+    centres, radii = np.asarray(centres, float), np.asarray(radii, float)
+    if hull is None:
+        v = np.ones(len(points))
+        for c, r in zip(centres, radii):
+            v *= cap_visibility(points, lamp_pos, lamp_radius, c, r)
+        return v
+    b = np.array([1.0 - cap_visibility(points, lamp_pos, lamp_radius, c, r)
+                  for c, r in zip(centres, radii)]).reshape(len(radii), len(points))
+    s = 1.0 - cap_visibility(points, lamp_pos, lamp_radius, hull[0], hull[1])
+    s = np.maximum(np.maximum(s, b.max(axis=0, initial=0.0)), 1e-6)
+    v = np.prod(1.0 - np.minimum(b / s, 1.0), axis=0)
+    return np.clip(1.0 - s * (1.0 - v), 0.0, 1.0)
 
 
 def sun_disk(direction, angle):

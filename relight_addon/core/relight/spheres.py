@@ -89,6 +89,18 @@ def volume_samples(triangles, n, seed=0):
     return pts, volume
 
 
+def silhouette_sphere(triangles):
+    """(centre, radius) of the sphere whose silhouette stands for the object's: centred on the
+    area-weighted centroid, with the object's mean projected area (Cauchy: a convex body's mean
+    shadow is a quarter of its surface area), pi r^2 = A / 4."""
+    tri = np.asarray(triangles, float).reshape(-1, 3, 3)
+    area = np.nan_to_num(0.5 * np.linalg.norm(
+        np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1))
+    total = max(float(area.sum()), 1e-300)
+    centre = (tri.mean(axis=1) * area[:, None]).sum(0) / total
+    return centre, float(np.sqrt(total / (4.0 * np.pi)))
+
+
 def _kmeans_pp(pts, k, rng):
     """k-means++ seeds keeping each point's distance to its nearest seed (k x n, not k^2 x n)."""
     first = rng.integers(len(pts))
