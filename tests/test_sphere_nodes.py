@@ -216,7 +216,7 @@ for frame in (1, 20):
     scene.frame_set(frame)
     for tag, engine in engines if frame == 20 else engines[:1]:
         scene.render.engine = engine
-        for name in lamps:                  # each lamp alone
+        for name in lamps if tag == "cycles" else ["LampA"]:    # each lamp alone
             for other, obj in lamps.items():
                 obj.data.energy = power[other] if other == name else 0.0
             shadowed = render(f"{tag}{frame}{name}")
@@ -242,8 +242,9 @@ def _camera_over_floor(size):
     scene.render.resolution_x = scene.render.resolution_y = size
     scene.render.resolution_percentage = 100
     scene.render.engine = "CYCLES"
-    scene.cycles.samples = 16
+    scene.cycles.samples = 1            # emission only: one sample at each pixel's centre
     scene.cycles.use_denoising = False
+    scene.eevee.taa_render_samples = 1
     scene.cycles.max_bounces = 0
     scene.render.filter_size = 0.01
     scene.view_settings.view_transform = "Standard"
@@ -303,7 +304,7 @@ def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, 
             diff = np.abs(np.asarray(frames[f"eevee20{name}"]["ratio"])
                           - np.asarray(frames[f"cycles20{name}"]["ratio"]))
             print(f"{name}: EEVEE vs Cycles ratio: mean {diff.mean():.3f}, max {diff.max():.3f}")
-            assert diff.mean() < 0.02
+            assert diff.mean() < 0.01 and diff.max() < 0.1
 
 
 def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_path):
