@@ -489,6 +489,29 @@ def object_role(obj, roles=None):
     return role if role in ROLES else None
 
 
+class _Instance:
+    __slots__ = ("object", "parent", "is_instance", "matrix_world")
+
+    def __init__(self, inst):
+        self.object, self.parent, self.is_instance = inst.object, inst.parent, inst.is_instance
+        self.matrix_world = inst.matrix_world.copy()
+
+
+def _ordered_instances(depsgraph):
+    """The depsgraph's object instances with the objects themselves in name order, so that a
+    read does not depend on the depsgraph's order (drivers added by Relight reorder it: the
+    same scene would otherwise read as a changed one).  Instances (collection, geometry-nodes,
+    particles) come first, as they are met: their evaluated objects may be temporary, so they
+    are read during the iteration."""
+    objects = []
+    for inst in depsgraph.object_instances:
+        if inst.is_instance:
+            yield inst
+        else:
+            objects.append(_Instance(inst))
+    yield from sorted(objects, key=lambda e: e.object.original.name_full)
+
+
 def _moving(obj) -> bool:
     from .sphere_nodes import moving
     return moving(obj)
@@ -548,7 +571,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
     labels_seen: dict = {}
     # depsgraph.object_instances: every evaluated object of the view layer plus the instances
     # (collection instances, geometry-nodes and particle instances) with their world matrices.
-    for inst in depsgraph.object_instances:
+    for inst in _ordered_instances(depsgraph):
         ev = inst.object
         obj = ev.original
         if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
