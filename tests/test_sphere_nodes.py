@@ -166,7 +166,7 @@ def test_node_groups_match_their_numpy_twin(room):
                   f"{a.max():.3f}, |bake - twin| max {np.abs(got - pred).max():.2e}")
             assert (V < 0.5).sum() >= 5 and (V > 0.99).sum() >= 100
             assert a.min() < 0.97           # indirect light: a part of the map is not shadowed
-            assert np.abs(got - pred).max() < 0.02
+            assert np.abs(got - pred).max() < 1e-3
             assert np.isfinite(shadowed).all()
     finally:
         for n, o in lamps.items():
@@ -305,6 +305,20 @@ def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, 
                           - np.asarray(frames[f"cycles20{name}"]["ratio"]))
             print(f"{name}: EEVEE vs Cycles ratio: mean {diff.mean():.3f}, max {diff.max():.3f}")
             assert diff.mean() < 0.01 and diff.max() < 0.1
+
+
+def test_many_spheres_still_compile_in_cycles(room):
+    """Cycles' SVM stack holds 255 floats: spheres evaluated side by side overflowed it beyond
+    16-24 spheres and every relit material rendered black.  Chained, 96 spheres compile."""
+    monkey = room
+    floor = bpy.data.objects["Floor"]
+    before = _bake(floor, floor.material_slots[0].material)[..., :3].mean()
+    monkey.relight_spheres = 96
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    after = _bake(floor, floor.material_slots[0].material)[..., :3].mean()
+    monkey.relight_spheres = 8
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert before > 0 and 0.8 * before < after <= before * 1.01
 
 
 def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_path):

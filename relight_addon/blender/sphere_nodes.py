@@ -12,7 +12,10 @@ map image's alpha).  Nothing runs in Python at render time:
   a sun is a disk SUN_DISTANCE away along its direction; an emissive-face lamp is a constant disk.
 * ``"Relight Spheres <object>"`` node groups (one per moving object) take the shading point and a
   lamp, bring both into the object's frame (its world location, rotation and scale, driven) and
-  return V.  Spheres are fitted once; the object's animation, drags and parenting move them.
+  return V: one ``"Relight Sphere Cap"`` node (a shared group) per sphere, chained through a
+  running product and maximum so that Cycles evaluates one sphere after the other (side by
+  side, their intermediate values overflowed its 255-float SVM stack beyond 16-24 spheres).
+  Spheres are fitted once; the object's animation, drags and parenting move them.
 
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
@@ -35,6 +38,7 @@ OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (object frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
+CAP_KEY = "relight_sphere_cap"         # on the shared per-sphere group: its version
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
 SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPHERES"
 COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
@@ -267,6 +271,49 @@ def _fit_hash(tris, n):
     return h.hexdigest()
 
 
+CAP_GROUP = "Relight Sphere Cap"
+CAP_VERSION = 1
+
+
+def cap_group(key):
+    """The shared node group of one sphere (sphere_shadow.cap_visibility's blocked part b, in
+    the object's frame): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b)."""
+    for ng in bpy.data.node_groups:
+        if ng.get(CAP_KEY) == CAP_VERSION and ng.get("relight_scene") == key:
+            return ng
+    vec, flt = "NodeSocketVector", "NodeSocketFloat"
+    ng, gin, gout = _new_group(CAP_GROUP, [
+        ("Position", vec), ("To Lamp", vec), ("Lamp Distance", flt), ("Lamp Angle", flt),
+        ("Lamp Cap", flt), ("Centre", vec), ("Radius", flt), ("Product", flt), ("Max", flt),
+        ("Part", flt)], [("Product", flt), ("Max", flt)], key)
+    ng[CAP_KEY] = CAP_VERSION
+    ng.use_fake_user = True
+    b = _Builder(ng)
+    i = gin.outputs
+    # the centre waits for the previous sphere's product (x 1e-30: no change in float32)
+    c = b.vmath("MULTIPLY_ADD", i["Product"], (1e-30, 1e-30, 1e-30))
+    ng.links.new(i["Centre"], c.node.inputs[2])
+    to_c = b.vmath("SUBTRACT", c, i["Position"])
+    d_c = b.vmath("LENGTH", to_c)
+    d_l, th_l = i["Lamp Distance"], i["Lamp Angle"]
+    cos_g = b.math("DIVIDE", b.vmath("DOT_PRODUCT", i["To Lamp"], to_c),
+                   b.math("MULTIPLY", d_l, d_c))
+    gamma = b.math("ARCCOSINE", b.math("MAXIMUM", b.math("MINIMUM", cos_g, 1.0), -1.0))
+    s_o = b.math("MINIMUM", b.math("DIVIDE", i["Radius"], d_c), 1.0)
+    th_o = b.math("ARCSINE", s_o)
+    ratio = b.math("MINIMUM", b.math("DIVIDE", b.one_minus_cos(s_o), i["Lamp Cap"]), 1.0)
+    width = b.math("MAXIMUM", b.math("MULTIPLY", b.math("MINIMUM", th_l, th_o), 2.0), EPS_ANGLE)
+    x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
+    blocked = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
+                     b.math("LESS_THAN", d_c, d_l))
+    blocked = b.math("MAXIMUM", blocked, b.math("LESS_THAN", d_c, i["Radius"]))
+    share = b.math("MINIMUM", b.math("DIVIDE", blocked, i["Part"]), 1.0)
+    ng.links.new(b.math("MULTIPLY", i["Product"], b.math("SUBTRACT", 1.0, share)),
+                 gout.inputs["Product"])
+    ng.links.new(b.math("MAXIMUM", i["Max"], blocked), gout.inputs["Max"])
+    return ng
+
+
 def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)."""
     ng, gin, gout = _new_group(f"Relight Spheres {obj.name}",
@@ -310,43 +357,44 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     s_l = b.math("MINIMUM", b.math("DIVIDE", r_l, d_l), 1.0)
     th_l = b.math("ARCSINE", s_l)
     om_l = b.math("MAXIMUM", b.one_minus_cos(s_l), 1e-30)
-    def blocked_by(c, r):      # the part of the lamp one sphere hides (cap_visibility's 1 - V)
-        to_c = b.vmath("SUBTRACT", tuple(c), p)
-        d_c = b.vmath("LENGTH", to_c)
-        cos_g = b.math("DIVIDE", b.vmath("DOT_PRODUCT", to_l, to_c), b.math("MULTIPLY", d_l, d_c))
-        gamma = b.math("ARCCOSINE", b.math("MAXIMUM", b.math("MINIMUM", cos_g, 1.0), -1.0))
-        s_o = b.math("MINIMUM", b.math("DIVIDE", float(r), d_c), 1.0)
-        th_o = b.math("ARCSINE", s_o)
-        ratio = b.math("MINIMUM", b.math("DIVIDE", b.one_minus_cos(s_o), om_l), 1.0)
-        width = b.math("MAXIMUM", b.math("MULTIPLY", b.math("MINIMUM", th_l, th_o), 2.0),
-                       EPS_ANGLE)
-        x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
-        out = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
-                     b.math("LESS_THAN", d_c, d_l))
-        return b.math("MAXIMUM", out, b.math("LESS_THAN", d_c, float(r)))
+    # One "Relight Sphere Cap" node per sphere, chained through the running product and
+    # maximum: Cycles' SVM compiler generates every node whose inputs are ready, so spheres
+    # that only depended on the shading point would all be evaluated at once and overflow its
+    # stack (measured: black materials beyond 16-24 spheres); each cap waits for the previous.
+    cap = cap_group(key)
 
-    parts = [blocked_by(c, r) for c, r in zip(centres, radii)]
-    if hull is None:           # the plain product
-        acc = None
-        for part in parts:
-            v = b.math("SUBTRACT", 1.0, part)
-            acc = v if acc is None else b.math("MULTIPLY", acc, v)
-    else:                      # independent within the part S the silhouette can hide
-        s_eff = blocked_by(hull[0], hull[1])
-        for part in parts:
-            s_eff = b.math("MAXIMUM", s_eff, part)
-        s_eff = b.math("MAXIMUM", s_eff, 1e-6)
-        prod = None
-        for part in parts:
-            v = b.math("SUBTRACT", 1.0, b.math("MINIMUM", b.math("DIVIDE", part, s_eff), 1.0))
-            prod = v if prod is None else b.math("MULTIPLY", prod, v)
-        if prod is not None:
-            acc = b.math("SUBTRACT", 1.0,
-                         b.math("MULTIPLY", s_eff, b.math("SUBTRACT", 1.0, prod)))
-        else:
-            acc = None
-    if acc is None:
+    def cap_node(centre, radius, product, maximum, part):
+        g = tree.new("ShaderNodeGroup")
+        g.node_tree = cap
+        g.location = (b.x, -400)
+        b.x += 10
+        for name, sock in (("Position", p), ("To Lamp", to_l), ("Lamp Distance", d_l),
+                           ("Lamp Angle", th_l), ("Lamp Cap", om_l)):
+            ng.links.new(sock, g.inputs[name])
+        g.inputs["Centre"].default_value = [float(x) for x in centre]
+        g.inputs["Radius"].default_value = float(radius)
+        for name, value in (("Product", product), ("Max", maximum), ("Part", part)):
+            if isinstance(value, float):
+                g.inputs[name].default_value = value
+            else:
+                ng.links.new(value, g.inputs[name])
+        return g
+
+    if hull is not None:        # the part of the lamp the silhouette can hide
+        part = b.math("MAXIMUM", cap_node(hull[0], hull[1], 1.0, 0.0, 1.0).outputs["Max"], 1e-6)
+    else:
+        part = 1.0
+    product, maximum = 1.0, 0.0
+    for c, r in zip(centres, radii):
+        g = cap_node(c, r, product, maximum, part)
+        product, maximum = g.outputs["Product"], g.outputs["Max"]
+    if isinstance(product, float):
         acc = b.math("ADD", 1.0, 0.0)
+    else:                       # V = 1 - max(S (1 - product), max)
+        lost = b.math("SUBTRACT", 1.0, product)
+        if not isinstance(part, float):
+            lost = b.math("MULTIPLY", part, lost)
+        acc = b.math("SUBTRACT", 1.0, b.math("MAXIMUM", lost, maximum))
     ng.links.new(acc, gout.inputs["Visibility"])
     return ng
 

@@ -69,22 +69,25 @@ def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull=None):
     Without ``hull``: the product over the spheres.  With ``hull`` = (centre, radius), a sphere
     whose silhouette stands for the object's (spheres.silhouette_sphere): the spheres' blocked
     parts b_i are taken as independent *within the part S of the lamp that the object can hide*
-    (S = the larger of the hull's blocked part and every b_i), B = S (1 - prod(1 - b_i / S)).
-    Near and far spheres of a thick object hide the same part of a large lamp; the plain product
+    (S = the hull's blocked part), B = max(S (1 - prod(1 - min(b_i / S, 1))), max b_i).  Near
+    and far spheres of a thick object hide the same part of a large lamp; the plain product
     counts it twice (measured: up to +40 % of missing light at 128 spheres).  For a small lamp S
-    is 0 or 1 and the two rules agree."""
+    is 0 or 1 and the rule is the larger of the max and the product.  One pass over the spheres
+    (a running product and maximum), as the node groups evaluate it."""
     centres, radii = np.asarray(centres, float), np.asarray(radii, float)
+    part = 1.0
+    if hull is not None:
+        part = np.maximum(1.0 - cap_visibility(points, lamp_pos, lamp_radius, hull[0], hull[1]),
+                          1e-6)
+    product = np.ones(len(points))
+    maximum = np.zeros(len(points))
+    for c, r in zip(centres, radii):
+        b = 1.0 - cap_visibility(points, lamp_pos, lamp_radius, c, r)
+        product = product * (1.0 - np.minimum(b / part, 1.0))
+        maximum = np.maximum(maximum, b)
     if hull is None:
-        v = np.ones(len(points))
-        for c, r in zip(centres, radii):
-            v *= cap_visibility(points, lamp_pos, lamp_radius, c, r)
-        return v
-    b = np.array([1.0 - cap_visibility(points, lamp_pos, lamp_radius, c, r)
-                  for c, r in zip(centres, radii)]).reshape(len(radii), len(points))
-    s = 1.0 - cap_visibility(points, lamp_pos, lamp_radius, hull[0], hull[1])
-    s = np.maximum(np.maximum(s, b.max(axis=0, initial=0.0)), 1e-6)
-    v = np.prod(1.0 - np.minimum(b / s, 1.0), axis=0)
-    return np.clip(1.0 - s * (1.0 - v), 0.0, 1.0)
+        return np.clip(product, 0.0, 1.0)
+    return np.clip(1.0 - np.maximum(part * (1.0 - product), maximum), 0.0, 1.0)
 
 
 def sun_disk(direction, angle):
