@@ -190,8 +190,10 @@ def attach():
         description="How a virtual object's shadows are computed")
     bpy.types.Object.relight_spheres = bpy.props.IntProperty(
         name="Spheres", default=32, min=1, max=512,
-        description="Spheres approximating a moving virtual object (more: closer shadows, "
-                    "slower renders); Update after changing it")
+        description="Spheres approximating a moving virtual object: more give closer shadows "
+                    "under small lamps and slower renders (each sphere is evaluated per lamp at "
+                    "every shading point; EEVEE's shader compiler fails at about 128). Update "
+                    "after changing it")
     if _forget_all not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(_forget_all)
 

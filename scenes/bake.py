@@ -204,6 +204,17 @@ def _cache_key(scene, objs, lamp_powers, samples, seed, bounces, margin, default
         add(np.round(co, 6))
         add(loops)
         add(np.round(np.array(eo.matrix_world, np.float64), 6))
+    # Meshes in the scene that are neither baked nor lamps still cast shadows (a virtual
+    # object in a truth bake): they are part of the key.  (None: the key is as it was.)
+    baked = {o.name for o in objs}
+    for xo in sorted((o for o in scene.objects if o.type == "MESH" and o.name not in baked
+                      and not emission_nodes(o) and not o.hide_render), key=lambda o: o.name):
+        me = xo.data
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        mw = np.array(xo.matrix_world, np.float64)
+        add(("unbaked", xo.name))
+        add(np.round(co.reshape(-1, 3) @ mw[:3, :3].T + mw[:3, 3], 6))
     w = scene.world
     add(None if w is None else (w.name, tuple(getattr(w, "color", ()))))
     return h.hexdigest()

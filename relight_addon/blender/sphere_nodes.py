@@ -39,6 +39,7 @@ FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (object frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
 CAP_KEY = "relight_sphere_cap"         # on the shared per-sphere group: its version
+WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is wired to
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
 SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPHERES"
 COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
@@ -47,8 +48,12 @@ SQRT_PI = float(np.sqrt(np.pi))
 
 
 def _prop(obj, name, default):
+    """A plain custom property set from a script, else the add-on's property.  Only a string
+    is read raw for the enum: Blender before 5.0 keeps an enum property's value as its index
+    in the same ID property, which a raw read would take for the value."""
     raw = obj.get(name) if hasattr(obj, "get") else None
-    if isinstance(raw, (str, int)) and not isinstance(raw, bool):
+    if isinstance(raw, str) or (isinstance(default, int) and isinstance(raw, int)
+                                and not isinstance(raw, bool)):
         return raw
     return getattr(obj, name, default)
 
@@ -430,7 +435,15 @@ def _lamp_terms(mat):
 
 
 def _wire_material(mat, lamp_group_of, sphere_groups):
+    """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
+    (a rebuilt tree makes every engine compile the material's shader again)."""
     tree = mat.node_tree
+    signature = repr(sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups))
+    if mat.get(WIRING_KEY) == signature and all(
+            n.node_tree is not None for n in tree.nodes
+            if n.name.startswith(NODE_PREFIX) and n.bl_idname == "ShaderNodeGroup"):
+        return 1 if sphere_groups else 0
+    mat[WIRING_KEY] = signature
     for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
         tree.nodes.remove(node)
     terms = _lamp_terms(mat)
