@@ -1,6 +1,6 @@
 """A virtual emissive mesh (issue 11): a glowing panel added after Precompute with Relight Role
 "virtual" is a lamp that is not in the photo.  Update gives it a map with the room's shadows
-and interreflections; its light is added to the relit room.
+and interreflections; its light is added to the relit room, following the emission Strength.
 
 Truth: the demo office of test_virtual_lamps (24 texels, 512-sample Cycles bakes), baked with
 the true albedo and the panel alone (real lamps off), before the room is "photographed".
@@ -87,6 +87,14 @@ def test_virtual_emissive_panel_against_cycles():
     # 2.0 holds for virtual lights elsewhere in this room (test_virtual_lamps).
     assert floor_got == pytest.approx(floor_want, rel=0.1)
     assert d <= 2.6
+    # its light follows the material's emission Strength through a driver (keyframable)
+    glow = bpy.data.materials["PanelGlow"]
+    glow.node_tree.nodes["Emission"].inputs["Strength"].default_value = 2 * STRENGTH
+    bpy.context.view_layer.update()
+    doubled = _relit(info)
+    assert float(np.mean(doubled["Floor"])) == pytest.approx(2 * floor_got, rel=1e-6)
+    glow.node_tree.nodes["Emission"].inputs["Strength"].default_value = STRENGTH
+    bpy.context.view_layer.update()
     # with the real lamps back on, the photo's light is there again and the panel's is added
     for k, p in power.items():
         bpy.data.lights[k].energy = p

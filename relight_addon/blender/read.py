@@ -210,6 +210,7 @@ class _MaterialInfo:
     image_node: object = None
     uv_map: str = ""               # "" -> the active render UV map
     two_sided: bool = True         # emission from both sides (Cycles' default)
+    strength: tuple = ()           # (node name, input name, value): the emission's Strength
 
 
 def _one_sided_emission(shader):
@@ -252,7 +253,8 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
         strength = float(node.inputs["Strength"].default_value)
         emission = _rgb(node.inputs["Color"].default_value) * strength
         return _MaterialInfo(np.zeros(3), np.maximum(emission, 0.0),
-                             two_sided=front_only is None)
+                             two_sided=front_only is None,
+                             strength=(node.name, "Strength", strength))
     colour_sock = _socket_value(shader, "Base Color", "Color")
     if colour_sock is None:
         report.warn(f"Material '{name}' uses an unsupported shader ({shader.name}): "
@@ -273,6 +275,9 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
                     "as a diffuse reflectance")
     base = _rgb(colour_sock.default_value)
     info = _MaterialInfo(base, emission)
+    if np.any(emission > 0) and kind == "ShaderNodeBsdfPrincipled":
+        info.strength = (shader.name, "Emission Strength",
+                         float(shader.inputs["Emission Strength"].default_value))
     node, direct = _find_image_node(colour_sock)
     if node is None:
         if colour_sock.is_linked:
@@ -718,6 +723,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                         report.lamp_sources.append({"name": f"{label}/{mkey}", "object": obj.name,
                                                     "material": mkey, "kind": "emissive",
                                                     "virtual_mesh": not in_photo,
+                                                    "strength": list(info.strength),
                                                     "power_photo": 1.0 if in_photo else 0.0,
                                                     "power_ref": 1.0})
                         report.lamps += 1

@@ -26,8 +26,8 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
   ``c0`` its colour then); ``S_k`` a Vector Math Scale node whose factor is 1, or the moving
   objects' sphere shadows of that lamp (sphere_nodes.py).  Simple expressions evaluate with Python auto-run off and without
   the extension.  ``P0`` is also kept as ``light.data["relight_power0"]``.  Exposure and
-  temperature changes are not followed.  Emissive-face lamps have no light to follow: their
-  ``I_k`` is a constant 1 (reported).
+  temperature changes are not followed.  An emissive mesh's ``I_k`` follows its material's
+  emission Strength (``s / s0``); its colour is not followed.
 * The user's material stays alive: the relit copy holds it in the ID property
   ``relight_original`` (an ID reference counts as a user, so it survives save and reopen), and
   the reader reads through a relit material to it.
@@ -228,6 +228,25 @@ def _add_driver(socket, light_data, p0, label):
     return fc
 
 
+def _add_strength_driver(socket, material, node_name, input_name, s0):
+    """``socket`` follows an emissive mesh's emission Strength over its value ``s0`` at
+    precompute (a simple expression on the user's material)."""
+    fc = socket.driver_add("default_value")
+    for mod in list(fc.modifiers):
+        fc.modifiers.remove(mod)
+    drv = fc.driver
+    drv.type = "SCRIPTED"
+    var = drv.variables.new()
+    var.name = "s"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = "MATERIAL"
+    var.targets[0].id = material
+    var.targets[0].data_path = f'node_tree.nodes["{node_name}"].inputs["{input_name}"]' \
+                               '.default_value'
+    drv.expression = f"s / {float(s0)!r}"
+    return fc
+
+
 def _add_colour_driver(socket, light_data, channel, c0):
     """``socket`` follows one channel of the light's colour over its value ``c0`` at
     precompute (a simple expression: no Python at render time)."""
@@ -283,7 +302,7 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
     x0 = tex.location.x + 300
     y0 = tex.location.y
     total = None
-    for j, (img, (lname, ldata, p0)) in enumerate(zip(maps, lamps)):
+    for j, (img, (lname, ldata, p0, *strength)) in enumerate(zip(maps, lamps)):
         y = y0 - 300 * (j + 1)
         mnode = tree.nodes.new("ShaderNodeTexImage")
         mnode.image = img
@@ -299,6 +318,8 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
         val.outputs[0].default_value = 1.0
         if ldata is not None and p0 > 0:
             _add_driver(val.outputs[0], ldata, p0, lname)
+        elif strength and strength[0][3] > 0:
+            _add_strength_driver(val.outputs[0], *strength[0])
         elif ldata is not None:  # lamp off at precompute time: its basis is 0 anyway
             val.outputs[0].default_value = 0.0
         scale = tree.nodes.new("ShaderNodeVectorMath")
@@ -482,6 +503,11 @@ def write_results(context, scene_data, report, solution) -> dict:
             if _editable(obj.data):
                 obj.data[POWER0] = p0
             lamps.append((name, obj.data, p0))
+        elif src.get("kind") == "emissive" and len(src.get("strength", ())) == 3 and \
+                bpy.data.materials.get(src.get("material") or "") is not None:
+            # an emissive mesh follows its material's emission Strength (I = s / s0)
+            lamps.append((name, None, 1.0, (bpy.data.materials[src["material"]],
+                                            *src["strength"])))
         else:
             warnings.append(f"Lamp '{name}' is not a light object: its intensity is fixed at 1")
             lamps.append((name, None, 1.0))
@@ -544,7 +570,7 @@ def write_results(context, scene_data, report, solution) -> dict:
             direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
             made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j],
                                            None if direct is None else direct[j])
-                              for j, (lname, _, _) in enumerate(lamps)]
+                              for j, (lname, *_) in enumerate(lamps)]
             if i in textures:
                 t_images[i] = writer.write(f"{src}.relight.T", textures[i])
     finally:
