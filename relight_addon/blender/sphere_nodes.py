@@ -32,11 +32,12 @@ import numpy as np
 
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
+from .write import MAP_PREFIX, SHADOW_PREFIX, _ours, _tag, add_driver, scene_key
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
-SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (object frame)
+SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (own frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
 CAP_KEY = "relight_sphere_cap"         # on the shared per-sphere group: its version
 WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is wired to
@@ -73,34 +74,7 @@ def moving_objects(scene):
     return [o for o in scene.objects if moving(o) and not o.hide_render]
 
 
-# -- drivers -----------------------------------------------------------------------------------
-
-def _driver(socket, expression, variables, index=-1):
-    fc = socket.driver_add("default_value", index) if index >= 0 else \
-        socket.driver_add("default_value")
-    for mod in list(fc.modifiers):
-        fc.modifiers.remove(mod)
-    drv = fc.driver
-    drv.type = "SCRIPTED"
-    for name, kind, target, what in variables:
-        var = drv.variables.new()
-        var.name = name
-        t = var.targets[0]
-        if kind == "TRANSFORMS":
-            var.type = "TRANSFORMS"
-            t.id = target
-            t.transform_type = what
-            t.transform_space = "WORLD_SPACE"
-            if what.startswith("ROT"):
-                t.rotation_mode = "QUATERNION"
-        else:
-            var.type = "SINGLE_PROP"
-            t.id_type = "LIGHT"
-            t.id = target
-            t.data_path = what
-    drv.expression = expression
-    return fc
-
+# -- drivers ---------------------------------------------------------------------------------
 
 def _transform_vars(obj, what):
     return [(w.lower().replace("_", ""), "TRANSFORMS", obj, w) for w in what]
@@ -167,7 +141,6 @@ class _Builder:
 
 
 def _new_group(name, inputs, outputs, key):
-    from .write import _tag
     ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
     for sock_name, kind in inputs:
         ng.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind)
@@ -218,17 +191,17 @@ def make_lamp_group(name, key, obj=None, centre=None, radius=0.0):
                  f"{d!r} * 2 * (roty * rotz - rotw * rotx)",
                  f"{d!r} * (1 - 2 * (rotx * rotx + roty * roty))")
         for i, e in enumerate(exprs):
-            _driver(pos.inputs[i], e, q)
-        _driver(rad.outputs[0], f"{d!r} * tan(a / 2)", [("a", "PROP", light, "angle")])
+            add_driver(pos.inputs[i], e, q)
+        add_driver(rad.outputs[0], f"{d!r} * tan(a / 2)", [("a", "LIGHT", light, "angle")])
         return ng
     for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
-        _driver(pos.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
+        add_driver(pos.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
     if light.type == "AREA":
-        _driver(rad.outputs[0], _area_radius_expression(light),
-                [("s", "PROP", light, "size"), ("t", "PROP", light, "size_y"),
+        add_driver(rad.outputs[0], _area_radius_expression(light),
+                [("s", "LIGHT", light, "size"), ("t", "LIGHT", light, "size_y"),
                  ("sc", "TRANSFORMS", obj, "SCALE_AVG")])
     else:
-        _driver(rad.outputs[0], "r", [("r", "PROP", light, "shadow_soft_size")])
+        add_driver(rad.outputs[0], "r", [("r", "LIGHT", light, "shadow_soft_size")])
     return ng
 
 
@@ -335,17 +308,17 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     # The object's world transform, driven: location, conjugate rotation (u, w), 1 / scale.
     loc = tree.new("ShaderNodeCombineXYZ")
     for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
-        _driver(loc.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
+        add_driver(loc.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
     u = tree.new("ShaderNodeCombineXYZ")
     for i, w in enumerate(("ROT_X", "ROT_Y", "ROT_Z")):
-        _driver(u.inputs[i], "-v", [("v", "TRANSFORMS", obj, w)])
+        add_driver(u.inputs[i], "-v", [("v", "TRANSFORMS", obj, w)])
     w = tree.new("ShaderNodeValue")
-    _driver(w.outputs[0], "v", [("v", "TRANSFORMS", obj, "ROT_W")])
+    add_driver(w.outputs[0], "v", [("v", "TRANSFORMS", obj, "ROT_W")])
     inv = tree.new("ShaderNodeCombineXYZ")
     for i, s in enumerate(("SCALE_X", "SCALE_Y", "SCALE_Z")):
-        _driver(inv.inputs[i], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, s)])
+        add_driver(inv.inputs[i], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, s)])
     inv_avg = tree.new("ShaderNodeValue")
-    _driver(inv_avg.outputs[0], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, "SCALE_AVG")])
+    add_driver(inv_avg.outputs[0], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, "SCALE_AVG")])
 
     def local(v):   # R^T (v - loc) / scale: the quaternion's conjugate rotates back
         d = b.vmath("SUBTRACT", v, loc.outputs[0])
@@ -422,7 +395,6 @@ def _sphere_groups(key):
 
 def _lamp_terms(mat):
     """(lamp name, its map node, its shadow factor node) of a relit material."""
-    from .write import MAP_PREFIX, SHADOW_PREFIX
     nodes = mat.node_tree.nodes
     out = []
     for node in nodes:
@@ -508,7 +480,6 @@ def sync(scene, depsgraph=None, seed=0) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
     no longer moving, and wire every relit material.  Returns a summary."""
-    from .write import _ours, scene_key
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}

@@ -24,10 +24,11 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
   power at precompute time, or a reference power for a lamp that was off then); ``C_k`` a
   Combine XYZ node whose three inputs follow the light's colour channel by channel (``c / c0``,
   ``c0`` its colour then); ``S_k`` a Vector Math Scale node whose factor is 1, or the moving
-  objects' sphere shadows of that lamp (sphere_nodes.py).  Simple expressions evaluate with Python auto-run off and without
-  the extension.  ``P0`` is also kept as ``light.data["relight_power0"]``.  Exposure and
-  temperature changes are not followed.  An emissive mesh's ``I_k`` follows its material's
-  emission Strength (``s / s0``); its colour is not followed.
+  objects' sphere shadows of that lamp (sphere_nodes.py).  Simple expressions evaluate with
+  Python auto-run off and without the extension (``add_driver``).  ``P0`` is also kept as
+  ``light.data["relight_power0"]``.  Exposure and temperature changes are not followed.  An
+  emissive mesh's ``I_k`` follows its material's emission Strength (``s / s0``); its colour is
+  not followed.
 * The user's material stays alive: the relit copy holds it in the ID property
   ``relight_original`` (an ID reference counts as a user, so it survives save and reopen), and
   the reader reads through a relit material to it.
@@ -212,57 +213,42 @@ def _source_image_node(tree, image_name):
     return (linked or cands or [None])[0]
 
 
-def _add_driver(socket, light_data, p0, label):
+def add_driver(socket, expression, variables):
+    """A SCRIPTED driver on ``socket``'s default value:
+    ``expression`` over ``variables``, each (name, kind, target, what): kind "TRANSFORMS" reads
+    the world-space transform channel ``what`` of the object ``target`` (rotations as a
+    quaternion), any other kind is the ID type of ``target`` whose property at the data path
+    ``what`` is read.  Kept to simple expressions, drivers run without Python (auto-run off, no
+    extension)."""
     fc = socket.driver_add("default_value")
     for mod in list(fc.modifiers):
         fc.modifiers.remove(mod)
     drv = fc.driver
     drv.type = "SCRIPTED"
-    var = drv.variables.new()
-    var.name = "p"
-    var.type = "SINGLE_PROP"
-    var.targets[0].id_type = "LIGHT"
-    var.targets[0].id = light_data
-    var.targets[0].data_path = "energy"
-    drv.expression = f"p / {float(p0)!r}"
+    for name, kind, target, what in variables:
+        var = drv.variables.new()
+        var.name = name
+        t = var.targets[0]
+        if kind == "TRANSFORMS":
+            var.type = "TRANSFORMS"
+            t.id = target
+            t.transform_type = what
+            t.transform_space = "WORLD_SPACE"
+            if what.startswith("ROT"):
+                t.rotation_mode = "QUATERNION"
+        else:
+            var.type = "SINGLE_PROP"
+            t.id_type = kind
+            t.id = target
+            t.data_path = what
+    drv.expression = expression
     return fc
 
 
-def _add_strength_driver(socket, material, node_name, input_name, s0):
-    """``socket`` follows an emissive mesh's emission Strength over its value ``s0`` at
-    precompute (a simple expression on the user's material)."""
-    fc = socket.driver_add("default_value")
-    for mod in list(fc.modifiers):
-        fc.modifiers.remove(mod)
-    drv = fc.driver
-    drv.type = "SCRIPTED"
-    var = drv.variables.new()
-    var.name = "s"
-    var.type = "SINGLE_PROP"
-    var.targets[0].id_type = "MATERIAL"
-    var.targets[0].id = material
-    var.targets[0].data_path = f'node_tree.nodes["{node_name}"].inputs["{input_name}"]' \
-                               '.default_value'
-    drv.expression = f"s / {float(s0)!r}"
-    return fc
-
-
-def _add_colour_driver(socket, light_data, channel, c0):
-    """``socket`` follows one channel of the light's colour over its value ``c0`` at
-    precompute (a simple expression: no Python at render time)."""
-    fc = socket.driver_add("default_value")
-    for mod in list(fc.modifiers):
-        fc.modifiers.remove(mod)
-    drv = fc.driver
-    drv.type = "SCRIPTED"
-    var = drv.variables.new()
-    var.name = "c"
-    var.type = "SINGLE_PROP"
-    var.targets[0].id_type = "LIGHT"
-    var.targets[0].id = light_data
-    var.targets[0].data_path = f"color[{channel}]"
-    drv.expression = f"c / {float(c0)!r}"
-    return fc
+def _ratio_driver(socket, var, kind, idb, data_path, value0):
+    """``socket`` follows a property (the variable ``var``) over its value ``value0`` at
+    precompute: ``var / value0``."""
+    return add_driver(socket, f"{var} / {float(value0)!r}", [(var, kind, idb, data_path)])
 
 
 def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=None):
@@ -317,9 +303,12 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
         val.location = (x0, y - 180)
         val.outputs[0].default_value = 1.0
         if ldata is not None and p0 > 0:
-            _add_driver(val.outputs[0], ldata, p0, lname)
+            _ratio_driver(val.outputs[0], "p", "LIGHT", ldata, "energy", p0)
         elif strength and strength[0][3] > 0:
-            _add_strength_driver(val.outputs[0], *strength[0])
+            material, node_name, input_name, s0 = strength[0]
+            _ratio_driver(val.outputs[0], "s", "MATERIAL", material,
+                          f'node_tree.nodes["{node_name}"].inputs["{input_name}"].default_value',
+                          s0)
         elif ldata is not None:  # lamp off at precompute time: its basis is 0 anyway
             val.outputs[0].default_value = 0.0
         scale = tree.nodes.new("ShaderNodeVectorMath")
@@ -336,7 +325,8 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
             for ch in range(3):
                 colour.inputs[ch].default_value = 1.0
                 if c0[ch] > 0:
-                    _add_colour_driver(colour.inputs[ch], ldata, ch, c0[ch])
+                    _ratio_driver(colour.inputs[ch], "c", "LIGHT", ldata, f"color[{ch}]",
+                                  c0[ch])
             tint = tree.nodes.new("ShaderNodeVectorMath")
             tint.operation = "MULTIPLY"
             tint.location = (x0 + 420, y)
