@@ -14,10 +14,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-from test_virtual_lamps import SIZE, SAMPLES, _de, _relit  # noqa: E402
-from test_precompute_operator import _addon  # noqa: E402
+from test_virtual_lamps import SIZE, SAMPLES, _de, _relit, photographed_office  # noqa: E402
 
 STRENGTH = 12.0            # Emission strength (radiance) of the panel
 
@@ -44,21 +42,15 @@ def _panel():
 
 def test_virtual_emissive_panel_against_cycles():
     from scenes.bake import bake_lighting
-    from scenes.office import build_office
-    sys.path.insert(0, ROOT)
-    from demo.office import make_photographed
-    _addon()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
-    power = dict(info.lamp_powers)
-    photo = bake_lighting(power, samples=SAMPLES, seed=0, texture_size=SIZE)
-    panel = _panel()
-    truth = bake_lighting({**{k: 0.0 for k in power}, "Panel": STRENGTH}, samples=SAMPLES,
-                          seed=1, texture_size=SIZE, objects=info.objects)
-    bpy.data.materials.remove(panel.material_slots[0].material)
-    bpy.data.objects.remove(panel)
-    make_photographed(bpy, info, photo)
-    bpy.context.scene.relight.preset = "medium"
+
+    def panel_alone(info, power):
+        panel = _panel()
+        truth = bake_lighting({**{k: 0.0 for k in power}, "Panel": STRENGTH}, samples=SAMPLES,
+                              seed=1, texture_size=SIZE, objects=info.objects)
+        bpy.data.materials.remove(panel.material_slots[0].material)
+        bpy.data.objects.remove(panel)
+        return truth
+    info, power, truth, _ = photographed_office(panel_alone)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     panel = _panel()
     panel.relight_role = "virtual"

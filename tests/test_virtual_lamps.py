@@ -26,7 +26,10 @@ LUM = np.array([0.2126, 0.7152, 0.0722])
 VIRTUAL = (3.8, 1.0, 1.6)
 
 
-def _office():
+def photographed_office(true_albedo_bakes):
+    """The test office: its photo (both real lamps, seed 0), then ``true_albedo_bakes(info,
+    power)`` (Cycles truth baked on the true albedo, before the room is "photographed"), then
+    the photographed room with the medium preset set.  Returns (info, power, truth, photo)."""
     from scenes.bake import bake_lighting
     from scenes.office import build_office
     sys.path.insert(0, ROOT)
@@ -36,16 +39,25 @@ def _office():
     info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
     power = dict(info.lamp_powers)
     photo = bake_lighting(power, samples=SAMPLES, seed=0, texture_size=SIZE)
-    truth = {k: bake_lighting({j: (v if j == k else 0.0) for j, v in power.items()},
-                              samples=SAMPLES, seed=1, texture_size=SIZE) for k in power}
-    # the virtual light's truth, baked with the true albedo before the room is "photographed"
-    v = _add_point("Virtual", VIRTUAL, 150.0)
-    truth["Virtual"] = bake_lighting({**{k: 0.0 for k in power}, "Virtual": 150.0},
-                                     samples=SAMPLES, seed=1, texture_size=SIZE)
-    bpy.data.objects.remove(v)
+    truth = true_albedo_bakes(info, power)
     make_photographed(bpy, info, photo)
     bpy.context.scene.relight.preset = "medium"
-    return info, power, truth
+    return info, power, truth, photo
+
+
+def _office():
+    from scenes.bake import bake_lighting
+
+    def bakes(info, power):
+        truth = {k: bake_lighting({j: (v if j == k else 0.0) for j, v in power.items()},
+                                  samples=SAMPLES, seed=1, texture_size=SIZE) for k in power}
+        # the virtual light's truth
+        v = _add_point("Virtual", VIRTUAL, 150.0)
+        truth["Virtual"] = bake_lighting({**{k: 0.0 for k in power}, "Virtual": 150.0},
+                                         samples=SAMPLES, seed=1, texture_size=SIZE)
+        bpy.data.objects.remove(v)
+        return truth
+    return photographed_office(bakes)[:3]
 
 
 def _add_point(name, location, energy):

@@ -14,10 +14,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit  # noqa: E402
-from test_precompute_operator import _addon  # noqa: E402
+from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit, photographed_office  # noqa: E402
 
 
 def _grey_box(location, size=0.6):
@@ -36,20 +34,14 @@ def _grey_box(location, size=0.6):
 def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
     from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
     from scenes.bake import bake_lighting
-    from scenes.office import build_office
-    sys.path.insert(0, ROOT)
-    from demo.office import make_photographed
-    _addon()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
-    power = dict(info.lamp_powers)
-    photo = bake_lighting(power, samples=SAMPLES, seed=0, texture_size=SIZE)
-    box = _grey_box((3.6, 1.0, 0.3))
-    truth = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE, objects=info.objects)
-    bpy.data.objects.remove(box)
-    make_photographed(bpy, info, photo)
-    scene = bpy.context.scene
-    scene.relight.preset = "medium"
+
+    def with_the_box(info, power):
+        box = _grey_box((3.6, 1.0, 0.3))
+        truth = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE,
+                              objects=info.objects)
+        bpy.data.objects.remove(box)
+        return truth
+    info, power, truth, photo = photographed_office(with_the_box)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     ignoring = _relit(info)
     box = _grey_box((3.6, 1.0, 0.3))
