@@ -94,6 +94,10 @@ def _agg(values):
     return float(v.mean()), float(v.max())
 
 
+def _num(x):
+    return "-" if x is None or not np.isfinite(x) else f"{x:.2f}"
+
+
 def room_figures(sc):
     """Mean over the room's lamp-off targets of each method's overall and former-shadow mean
     (and p95), plus the doubled targets' overall mean."""
@@ -111,6 +115,8 @@ def room_figures(sc):
         }
     doubled = [v for k, v in sc["targets"].items() if k.endswith("x2")]
     fig["doubled"] = float(np.mean([r["relit"]["all"][0] for r in doubled]))
+    orig = sc["targets"].get("original")
+    fig["original"] = float("nan") if orig is None else orig["relit"]["all"][0]
     return fig
 
 
@@ -125,7 +131,9 @@ def write_report(raw, path_md, path_png):
              "mean overall / in the switched-off lamps' former shadows; 'x2' is the mean over the "
              "doubled targets.  Baselines: DRB97 (no texture correction), the photo scaled by the "
              "best single factor given the truth (global exposure scale), the photo unchanged.  "
-             "Noise floor: photo vs truth at the photo's own lighting (two independent bakes).  "
+             "Noise floor: photo vs truth at the photo's own lighting (two independent bakes); "
+             "'orig': the relit result at the photo's lighting vs the truth (target: within the "
+             "floor + 0.3; '-' where the room was last run before that column existed).  "
              f"Rooms {fam.HELD_OUT} are held out from tuning.", ""]
     for preset in PRESETS:
         key = f"exact/{preset}"
@@ -133,9 +141,9 @@ def write_report(raw, path_md, path_png):
         if not have:
             continue
         lines += [f"## {preset}", "",
-                  "| room | lamps | floor | relit: all / shadow (p95) | x2 | DRB97 | global scale "
-                  "| photo | ratio err | rho^ | time |",
-                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| room | lamps | floor | orig | relit: all / shadow (p95) | x2 | DRB97 "
+                  "| global scale | photo | ratio err | rho^ | time |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in have:
             sc = raw[r][key]
             f = room_figures(sc)
@@ -143,7 +151,7 @@ def write_report(raw, path_md, path_png):
             d = f.get("drb97", {"all": np.nan, "shadow": np.nan})
             lines.append(
                 f"| {r}{held} | {len(sc['lamps'])} | {sc['floor'][0]:.2f} | "
-                f"{f['relit']['all']:.2f} / {f['relit']['shadow']:.2f} "
+                f"{_num(f['original'])} | {f['relit']['all']:.2f} / {f['relit']['shadow']:.2f} "
                 f"({f['relit']['all_p95']:.1f} / {f['relit']['shadow_p95']:.1f}) | "
                 f"{f['doubled']:.2f} | {d['all']:.2f} / {d['shadow']:.2f} | "
                 f"{f['scale']['all']:.2f} / {f['scale']['shadow']:.2f} | "
@@ -157,7 +165,12 @@ def write_report(raw, path_md, path_png):
             floor = [raw[r][key]["floor"][0] for r in sel]
             rel_all = [f["relit"]["all"] for f in figs]
             rel_sh = [f["relit"]["shadow"] for f in figs]
+            orig = [f["original"] for f in figs if np.isfinite(f["original"])]
+            excess = [f["original"] - raw[r][key]["floor"][0] for r, f in zip(sel, figs)
+                      if np.isfinite(f["original"])]
             lines.append(f"| **{label}: mean (worst)** | | {np.mean(floor):.2f} | "
+                         + (f"{np.mean(orig):.2f} (floor +{np.max(excess):.2f}) | " if orig
+                            else "- | ") +
                          f"**{np.mean(rel_all):.2f} ({np.max(rel_all):.2f}) / "
                          f"{np.nanmean(rel_sh):.2f} ({np.nanmax(rel_sh):.2f})** | "
                          f"{np.mean([f['doubled'] for f in figs]):.2f} | "

@@ -6,8 +6,8 @@
   true ones; ``"off30"``: alternately 30 % too high and too low; ``"unknown"``: every lamp at
   its type's base power, i.e. no ratio information) and reads it with the add-on's reader.
 * ``score(room, result, ...)`` (bpy-free): CIEDE2000 of the relit textures against the truth
-  for every target lighting (each lamp off, each doubled, all but one off), overall and in each
-  switched-off lamp's former shadow, with the baselines beside them: the photo unchanged, the
+  for every target lighting (the original, each lamp off, each doubled, all but one off),
+  overall and in each switched-off lamp's former shadow, with the baselines beside them: the photo unchanged, the
   photo scaled by the best single factor (the global exposure scale, given the truth's total),
   and DRB97 when its result is passed; the noise floor (photo vs truth at the photo's lighting);
   the error of the lamp exitance ratios.
@@ -114,10 +114,10 @@ def _texels(room, result, images):
 
 
 def targets(spec):
-    """{label: {lamp: factor}} of the target lightings: each lamp off, each doubled, and (with
-    several lamps) each alone."""
+    """{label: {lamp: factor}} of the target lightings: the photo's own ("original"), each lamp
+    off, each doubled, and (with several lamps) each alone."""
     names = [lp.name for lp in spec.lamps]
-    out = {}
+    out = {"original": {}}
     for n in names:
         out[f"{n} off"] = {n: 0.0}
         out[f"{n} x2"] = {n: 2.0}

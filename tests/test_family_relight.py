@@ -5,9 +5,10 @@ user hands them to the add-on and scored against their Cycles truth (scenes/fami
 Room 20: unequal lamps (3:1), a wall disk 0.3 m from the east wall, a table.  Room 21: a pendant
 point lamp and a spot on the west wall.  Room 22: a warm square and a cool emissive panel (1:2).
 Bounds are the benchmark's targets (benchmarks/results/family.md), looser where the issue says
-so: lamp off <= 2.0 CIEDE2000 on the mean over the rooms, overall and in the switched-off
-lamp's former shadow, <= 3.0 on every target, in the former shadow at most half the global
-exposure scale's error; exitance ratios within 5 % with exact powers.
+so: the original lighting within the noise floor + 0.3; lamp off <= 2.0 CIEDE2000 on the mean
+over the rooms, overall and in the switched-off lamp's former shadow, <= 3.0 on every target,
+in the former shadow at most half the global exposure scale's error; exitance ratios within
+5 % with exact powers.
 """
 import numpy as np
 import pytest
@@ -63,6 +64,14 @@ def test_doubled_lamps_against_the_truth(scored):
         for label, row in sc["targets"].items():
             if label.endswith("x2"):
                 assert row["relit"]["all"][0] <= 2.0, (index, label, row)
+
+
+def test_original_lighting_within_the_noise_floor(scored):
+    """At the photo's own lighting the relit textures against the truth stay within the noise
+    floor (photo vs truth: two independent bakes) + 0.3 CIEDE2000, the issue's target."""
+    for index, (room, res, sc) in scored.items():
+        orig = sc["targets"]["original"]["relit"]["all"][0]
+        assert orig <= sc["floor"][0] + 0.3, (index, orig, sc["floor"])
 
 
 def test_exitance_ratios_with_exact_powers(scored):
