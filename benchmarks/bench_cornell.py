@@ -131,11 +131,33 @@ def main():
             print(f"{preset}: {status}")
         rows.append(row)
 
-    write_md(rows, noise_mean, noise_max, raw_rate)
+    spread = seed_spread(scene, ref, lamp)
+    write_md(rows, noise_mean, noise_max, raw_rate, spread)
     write_png(rows, noise_mean)
     raw = [{k: v for k, v in r.items()} for r in rows]
     print(f"wrote {RESULTS / 'cornell.md'} and {RESULTS / 'cornell.png'}")
     return raw
+
+
+SEEDS = range(5)
+
+
+def seed_spread(scene, ref, lamp):
+    """{preset: [(seed, links, mean err, max err, seconds)]} over SEEDS (ultra left out: ~1 min a
+    solve), in this process."""
+    from relight_addon.core.radiosity.precompute import solve_radiosity
+    out = {}
+    for preset in PRESETS:
+        out[preset] = []
+        for seed in SEEDS:
+            t0 = time.perf_counter()
+            sol = solve_radiosity(scene, preset, seed=seed)
+            B = sol.patch_radiosity()
+            dt = time.perf_counter() - t0
+            mean, worst = errors(B, ref, lamp)
+            out[preset].append((seed, int(sol.stats()["links"]), mean, worst, dt))
+            print(f"{preset} seed {seed}: mean {100 * mean:.2f} %, max {100 * worst:.2f} %")
+    return out
 
 
 def embree_raw_rate(scene, n=1_000_000, seed=0):
@@ -152,7 +174,7 @@ def embree_raw_rate(scene, n=1_000_000, seed=0):
     return n / (time.perf_counter() - t0)
 
 
-def write_md(rows, noise_mean, noise_max, raw_rate):
+def write_md(rows, noise_mean, noise_max, raw_rate, spread):
     RESULTS.mkdir(parents=True, exist_ok=True)
     load = os.getloadavg()
     now = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
@@ -188,6 +210,17 @@ def write_md(rows, noise_mean, noise_max, raw_rate):
             f"{run['total']:.3f}", f"{100 * r['mean_err']:.3f}", f"{100 * r['max_err']:.3f}",
             str(s.get("rays", 0)),
             f"{s.get('rays', 0) / max(s.get('t_visibility', 0.0), 1e-9) / 1e6:.2f}"]) + " |")
+    lines += ["", f"Spread over the random seed (seeds {SEEDS.start}-{SEEDS.stop - 1}, one "
+              "process; the oracle's and the final links' rays are random): min - max over the "
+              "seeds.", "",
+              "| preset | links | mean rel err % | max rel err % | total s |",
+              "|---|---:|---:|---:|---:|"]
+    for preset, runs in spread.items():
+        col = list(zip(*runs))
+        lines.append(f"| {preset} | {min(col[1])} - {max(col[1])} | "
+                     f"{100 * min(col[2]):.2f} - {100 * max(col[2]):.2f} | "
+                     f"{100 * min(col[3]):.2f} - {100 * max(col[3]):.2f} | "
+                     f"{min(col[4]):.2f} - {max(col[4]):.2f} |")
     lines += [
         "",
         f"Mitsuba noise (relative standard error of the reference, 16 non-lamp patches x 3 "

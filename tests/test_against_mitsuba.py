@@ -40,3 +40,21 @@ def test_cornell_box_patch_radiosity_matches_mitsuba(cornell_reference):
     assert noise.mean() < 0.01
     assert rel.mean() <= 0.03
     assert np.all(np.isfinite(ours))
+
+
+def test_cornell_box_medium_is_stable_over_seeds(cornell_reference):
+    """The medium preset gives the same quality whatever the random seed (issue 10): before the
+    oracle re-tested large links its few rays called unoccluded, a block face came out 14 % dark
+    on two seeds of five (worst quad 15.5 % vs 5.5 % on the others).  Bounds: the reference's
+    own noise (~1 % worst patch at 2^20 spp) plus the preset's spread measured at 2^22 spp
+    (mean 1.95-2.43 %, worst channel 4.5-6.5 % over seeds 0-4)."""
+    scene, ref, err = cornell_reference
+    lit = scene.emission.max(axis=1) == 0
+    worst = []
+    for seed in range(5):
+        ours = solve_radiosity(scene, "medium", seed=seed).patch_radiosity()
+        rel = np.abs(ours[lit] - ref[lit]) / np.maximum(ref[lit], 1e-12)
+        print(f"seed {seed}: mean {rel.mean():.4f}, max {rel.max():.4f}")
+        assert rel.mean() <= 0.03, seed
+        worst.append(rel.max())
+    assert max(worst) <= 0.08, worst
