@@ -364,6 +364,34 @@ def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_pat
     assert not [g for g in bpy.data.node_groups if g.get("relight_generated")]
 
 
+def test_a_lamp_added_after_a_moving_object_is_shadowed_by_it():
+    """A virtual lamp inserted after a moving object gets the object's sphere shadow too (its
+    map's shadow factor wired to the spheres), and the relit materials are wired again after an
+    Update that rebuilt them."""
+    _addon()
+    build_scene()
+    bpy.context.scene.relight.preset = "draft"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    _monkey(spheres=4)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    data = bpy.data.lights.new("Added", "POINT")
+    data.energy = 50.0
+    lamp = bpy.data.objects.new("Added", data)
+    lamp.location = (0.2, -0.3, 1.9)
+    bpy.context.scene.collection.objects.link(lamp)
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    sn = _nodes()
+    assert any(g.get(sn.LAMP_KEY) == "Added" for g in bpy.data.node_groups)
+    for name in ("Floor", "Wall0"):
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            continue
+        nodes = obj.material_slots[0].material.node_tree.nodes
+        for lname in ("LampA", "LampB", "Added"):
+            assert nodes["S " + lname].inputs["Scale"].is_linked, (name, lname)
+
+
 def test_undo_and_redo_an_inserted_moving_object():
     """Undo after the Update that inserted a moving object takes its shadow out of the relit
     materials; redo brings it back (undo steps pushed around each call, as the UI does)."""
