@@ -19,16 +19,18 @@ from .settings import STATUS, status
 POWER0 = "relight_power0"
 
 
-def _relit_drivers(light_data):
-    """Drivers of generated materials that read ``light_data.energy``."""
+def _power_drivers(light_data):
+    """(driver, its variable's name) of generated materials' drivers that read
+    ``light_data.energy`` (not its colour: those keep their own expression)."""
     for mat in bpy.data.materials:
         if not mat.get("relight_generated") or mat.node_tree is None:
             continue
         ad = mat.node_tree.animation_data
         for fc in (ad.drivers if ad else []):
             for var in fc.driver.variables:
-                if var.targets[0].id == light_data:
-                    yield fc
+                t = var.targets[0]
+                if t.id == light_data and t.data_path == "energy":
+                    yield fc, var.name
 
 
 def match_lamp_powers(scene):
@@ -53,8 +55,8 @@ def match_lamp_powers(scene):
             continue
         light.energy = new
         light[POWER0] = new
-        for fc in _relit_drivers(light):
-            fc.driver.expression = f"p / {new!r}"
+        for fc, var in _power_drivers(light):
+            fc.driver.expression = f"{var} / {new!r}"
         changed.append(name)
     st = dict(st)
     st["exitance_scale"] = [1.0 / math.pi if n in changed else s

@@ -465,13 +465,25 @@ def test_status_for_the_panel(fresh):
 
 def test_match_lamp_powers_keeps_the_relit_look(fresh):
     """Powers become P0 * pi * s_k; drivers and relight_power0 follow, so every I_k stays 1;
-    a second run changes nothing."""
+    the colour drivers are left as they were (all still simple expressions: they run with
+    auto-run off); a second run changes nothing."""
     scene = bpy.context.scene
     st = scene["relight_status"].to_dict()
     before = {k: bpy.data.lights[k].energy for k in LAMPS}
+    generated = [m for m in bpy.data.materials if m.get("relight_generated")]
+
+    def drivers():
+        return {(m.name, fc.data_path): (fc.driver.expression, fc.driver.is_valid,
+                                         fc.driver.is_simple_expression)
+                for m in generated for fc in m.node_tree.animation_data.drivers}
+    old = drivers()
     try:
         assert bpy.ops.relight.match_lamp_powers() == {"FINISHED"}
         bpy.context.view_layer.update()
+        new = drivers()
+        assert all(valid and simple for _, valid, simple in new.values()), new
+        changed = {k for k in new if new[k][0] != old[k][0]}
+        assert changed and all('nodes["I ' in k[1] for k in changed), changed   # power only
         for k, s in zip(st["lamps"], st["exitance_scale"]):
             want = before[k] * np.pi * s
             assert bpy.data.lights[k].energy == pytest.approx(want, rel=1e-6)
@@ -486,10 +498,11 @@ def test_match_lamp_powers_keeps_the_relit_look(fresh):
         for k, p in before.items():
             bpy.data.lights[k].energy = p
             bpy.data.lights[k]["relight_power0"] = p
-        for mat in [m for m in bpy.data.materials if m.get("relight_generated")]:
+        for mat in generated:
             for fc in mat.node_tree.animation_data.drivers:
-                light = fc.driver.variables[0].targets[0].id
-                fc.driver.expression = f"p / {light.energy!r}"
+                t = fc.driver.variables[0].targets[0]
+                if t.data_path == "energy":
+                    fc.driver.expression = f"{fc.driver.variables[0].name} / {t.id.energy!r}"
         scene["relight_status"] = st
 
 
