@@ -31,11 +31,6 @@ from .solver import LeafSystem, SolveInfo
 MAX_REFINE_ROUNDS = 40
 # Shadow boundaries stop one level above the minimum element size (their links multiply fast).
 SHADOW_AREA_FACTOR = 4.0
-# A link that carries enough light to be refined if it were partly visible, but whose few oracle
-# rays all agreed (all free or all blocked), is tested again with this many times the rays: four
-# rays miss a shadow crossing a large element often enough that one Cornell-box block face came
-# out 14 % dark on two seeds of five (its floor link judged unoccluded, never refined).
-CONFIRM_RAYS_FACTOR = 4
 
 
 class Cancelled(Exception):
@@ -221,9 +216,12 @@ def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_a
 def _confirm_visibility(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area,
                         occluder, rng, scale, timer):
     """Links judged all-visible or all-hidden by the oracle's few rays, tested again with
-    CONFIRM_RAYS_FACTOR times the rays where a shadow on them would be refined (the BFV
-    criterion and room to split the receiver)."""
-    if occluder is None or links.n == 0:
+    ``q.confirm_rays`` times the rays where a shadow on them would be refined (the BFV criterion
+    and room to split the receiver).  Four rays miss a shadow crossing a large element often
+    enough that a Cornell-box block face came out 14 % dark at medium on two seeds of five (its
+    floor link judged unoccluded, never refined).  Draft does without (no gain on its own
+    error, which is larger)."""
+    if occluder is None or links.n == 0 or q.confirm_rays <= 0:
         return links
     r, s = links.receiver, links.source
     check = ((links.vis != PARTIAL)
@@ -232,7 +230,7 @@ def _confirm_visibility(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, 
     if not check.any():
         return links
     idx = np.flatnonzero(check)
-    rays = CONFIRM_RAYS_FACTOR * q.oracle_rays
+    rays = q.confirm_rays * q.oracle_rays
     _, _, free, partial = oracle_estimates(h, r[idx], s[idx], occluder, rays, rng, scale, timer)
     old = links.V[idx]
     V = links.V.copy()

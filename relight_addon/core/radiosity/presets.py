@@ -18,6 +18,7 @@ class Quality:
     quadrature: int        # m x m Gauss points per leaf for the final form factors
     rays: int              # visibility rays per final link (at least one per sample point)
     oracle_rays: int       # visibility rays per candidate link during refinement
+    confirm_rays: int = 0  # x oracle_rays: re-test of bright links the oracle's rays all agreed on
     passes: int = 3        # refine / solve passes (the BF oracle needs a radiosity estimate)
     separation: float = 0.4  # cluster link when (radius sum) < separation * (centre distance)
     cluster_above: int = 400  # input patch count above which patches are clustered
@@ -32,11 +33,11 @@ PRESETS = {
     "draft": Quality("draft", eps_bf=0.02, eps_bfv=0.01, min_area=2e-3, quadrature=1, rays=4,
                      oracle_rays=4, passes=2, separation=0.4),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
-                      rays=8, oracle_rays=4, passes=2, separation=0.3),
+                      rays=8, oracle_rays=4, passes=2, separation=0.3, confirm_rays=4),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
-                    oracle_rays=8, separation=0.25),
+                    oracle_rays=8, separation=0.25, confirm_rays=4),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15),
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4),
 }
 
 
