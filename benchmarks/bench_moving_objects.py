@@ -90,14 +90,8 @@ print("EEVEE_TIMES " + json.dumps(times))
 # -- scene -------------------------------------------------------------------------------------
 
 def _grey(bpy):
-    mat = bpy.data.materials.get("bench grey")
-    if mat is None:
-        mat = bpy.data.materials.new("bench grey")
-        bsdf = mat.node_tree.nodes["Principled BSDF"]
-        bsdf.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
-        bsdf.inputs["Roughness"].default_value = 1.0
-        bsdf.inputs["Specular IOR Level"].default_value = 0.0
-    return mat
+    from scenes.materials import grey_diffuse
+    return grey_diffuse(bpy, "bench grey")
 
 
 def add_objects(bpy):

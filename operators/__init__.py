@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies, lamps, precompute, settings, unwrap
+from . import dependencies, eevee, lamps, precompute, settings, unwrap
 
-_modules = (settings, dependencies, precompute, unwrap, lamps)
+_modules = (settings, dependencies, precompute, unwrap, lamps, eevee)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 

@@ -114,6 +114,7 @@ class RELIGHT_PT_main(bpy.types.Panel):
             for text, icon in lines:
                 box.label(text=text, icon=icon)
             box.operator("relight.match_lamp_powers", icon='LIGHT_SUN')
+            box.operator("relight.eevee_light", icon='LIGHTPROBE_VOLUME')
         warnings = warning_lines(context.scene)
         if warnings:
             box = layout.box()

@@ -16,18 +16,14 @@ bpy = pytest.importorskip("bpy")
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit, photographed_office  # noqa: E402
+from scenes.materials import grey_diffuse  # noqa: E402
 
 
 def _grey_box(location, size=0.6):
     bpy.ops.mesh.primitive_cube_add(size=size, location=location)
     box = bpy.context.active_object
     box.name = "VBox"
-    mat = bpy.data.materials.new("grey")
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
-    bsdf.inputs["Roughness"].default_value = 1.0
-    bsdf.inputs["Specular IOR Level"].default_value = 0.0
-    box.data.materials.append(mat)
+    box.data.materials.append(grey_diffuse(bpy))
     return box
 
 

@@ -427,6 +427,11 @@ def clear_relight_data(scene) -> dict:
     groups = [g for g in bpy.data.node_groups if _ours(g, key)]    # lamp and sphere groups
     for g in groups:
         bpy.data.node_groups.remove(g)
+    for obj in [o for o in bpy.data.objects if _ours(o, key)]:      # EEVEE's irradiance volume
+        data = obj.data
+        bpy.data.objects.remove(obj)
+        if isinstance(data, bpy.types.LightProbe) and data.users == 0:
+            bpy.data.lightprobes.remove(data)
     lights = 0
     for obj in scene.objects:
         if obj.type == "LIGHT" and POWER0 in obj.data and _editable(obj.data):

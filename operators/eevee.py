@@ -1,0 +1,71 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""``relight.eevee_light``: an irradiance volume over the relit room, baked, so that EEVEE lights
+virtual objects with the relit surfaces as Cycles does (relight_addon/blender/eevee_probe.py)."""
+
+import bpy
+
+from .base import RelightOperator
+from .settings import last_result, status
+
+
+def _modules():
+    from ..relight_addon.blender import eevee_probe, write
+    return eevee_probe, write
+
+
+class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
+    """Place an irradiance volume over the relit room and bake it, so that EEVEE lights virtual
+    objects with the relit room's light (Cycles does by itself).  Bake again after moving
+    surfaces; lamp dimming is followed by a driver"""
+
+    bl_idname = "relight.eevee_light"
+    bl_label = "Light Virtual Objects in EEVEE"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    spacing: bpy.props.FloatProperty(
+        name="Spacing", description="Distance between the volume's light samples",
+        default=0.25, min=0.05, soft_max=2.0, unit='LENGTH')
+    bake: bpy.props.BoolProperty(
+        name="Bake", description="Bake the volume now (Blender's light-probe bake)", default=True)
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        _, write = _modules()
+        if not status(context.scene) or not write.has_relight_data(context.scene):
+            return "Run Precompute first: there is no relit room to light objects with"
+        return None
+
+    def execute(self, context):
+        eevee_probe, _ = _modules()
+        scene = context.scene
+        st = status(scene)
+        names = list(st.get("lamps", []))
+        result = last_result(scene)
+        if result is not None and names and all(len(m) == len(names)
+                                                for m in result.maps.values()):
+            shares = eevee_probe.lamp_shares(result, names)
+        else:                                   # after a reload: no maps in memory
+            shares = {n: 1.0 / len(names) for n in names} if names else {}
+        probe = eevee_probe.fit_volume(scene, shares, self.spacing)
+        if probe is None:
+            self.report({'ERROR'}, "Relight: no relit surface in this scene")
+            return {'CANCELLED'}
+        r = probe.data
+        count = r.resolution_x * r.resolution_y * r.resolution_z
+        if not self.bake:
+            self.report({'INFO'}, f"Relight: irradiance volume placed ({count} samples)")
+            return {'FINISHED'}
+        # Blender's own bake: a job with progress and cancel in the UI, blocking in background
+        how = 'EXEC_DEFAULT' if bpy.app.background else 'INVOKE_DEFAULT'
+        with context.temp_override(active_object=probe, object=probe,
+                                   selected_objects=[probe]):
+            bpy.ops.object.lightprobe_cache_bake(how, subset='ACTIVE')
+        self.report({'INFO'}, f"Relight: irradiance volume of {count} samples "
+                              + ("baked" if bpy.app.background else "baking"))
+        return {'FINISHED'}
+
+
+classes = (RELIGHT_OT_eevee_light,)

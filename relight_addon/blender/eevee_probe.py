@@ -1,0 +1,138 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""An irradiance volume so that EEVEE lights virtual objects with the relit room (issue 11).
+
+Cycles lights a virtual object with the relit surfaces' emission by itself; EEVEE lets emission
+light other surfaces only through its light probes, so without one a virtual object gets the
+lamps' direct light and nothing of the room's (about half of its light in the demo office:
+benchmarks/results/object_appearance.md).  ``fit_volume`` puts one irradiance volume over the
+relit geometry, a sample every ``spacing`` metres (at most MAX_RESOLUTION per axis); Blender's
+own light-probe bake then captures the relit emission.
+
+The bake is a still of the lamps as they are when it runs.  So that dimming or keyframing the
+lamps still shows on the objects, the volume's intensity is driven (a simple expression: farm
+safe) by sum_k w_k I_k / sum_k w_k I_k(bake), w_k lamp k's share of the relit room's light and
+I_k = power / power at precompute, as the relit materials' own drivers; exact when the lamps
+change together, a share-weighted blend otherwise.  Lamps that are emissive meshes count with
+their share at I = 1.
+"""
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+from . import write
+
+PROBE_NAME = "Relight Irradiance Volume"
+SPACING = 0.25              # m between the volume's samples
+MAX_RESOLUTION = 32         # samples per axis
+MARGIN = 0.98               # inside the walls: samples on them see behind them
+BAKED_KEY = "relight_baked_intensity"   # sum_k w_k I_k when the volume was baked
+
+
+def relit_bounds(scene):
+    """(lo, hi) world corners of the box around the objects with relit materials, or None."""
+    pts = []
+    for obj in {o for o, _, _ in write._relit_slots(scene)}:
+        pts.append(np.array([obj.matrix_world @ Vector(c) for c in obj.bound_box]))
+    if not pts:
+        return None
+    pts = np.concatenate(pts)
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def find_volume(scene):
+    key = write.scene_key(scene)
+    return next((o for o in scene.objects
+                 if o.type == "LIGHT_PROBE" and write._ours(o, key)), None)
+
+
+def lamp_shares(result, names):
+    """{lamp: share of the relit room's light (luminance summed over every texel)} from a
+    ShadowFreeResult whose maps are in the order of ``names``."""
+    lum = np.array([0.2126, 0.7152, 0.0722], np.float32)
+    total = np.zeros(len(names))
+    for i, tex in result.texture.items():
+        m = result.maps[i]                               # (k, H, W, 3)
+        total += np.einsum("khwc,hwc,c->k", m[..., :3], tex[..., :3], lum, optimize=True)
+    total = np.where(np.isfinite(total) & (total > 0), total, 0.0)
+    s = total.sum()
+    return {n: (float(v / s) if s > 0 else 1.0 / len(names)) for n, v in zip(names, total)}
+
+
+def intensity_terms(scene, shares):
+    """([(variable, light data, power at precompute, share)], constant share): the lamps the
+    driver follows, and the share of the ones it cannot (emissive meshes, missing lights)."""
+    terms, constant = [], 0.0
+    for name, w in shares.items():
+        obj = scene.objects.get(name)
+        if obj is not None and obj.type == "LIGHT" and write.POWER0 in obj.data:
+            terms.append((f"p{len(terms)}", obj.data, float(obj.data[write.POWER0]), w))
+        else:
+            constant += w
+    return terms, constant
+
+
+def current_level(terms, constant):
+    """sum_k w_k I_k for the lamps as they are now."""
+    return constant + sum(w * (light.energy / p0 if p0 > 0 else 0.0)
+                          for _, light, p0, w in terms)
+
+
+def fit_volume(scene, shares, spacing=SPACING):
+    """Create or refit ``scene``'s irradiance volume over the relit geometry and drive its
+    intensity; returns the probe object (None when nothing is relit)."""
+    bounds = relit_bounds(scene)
+    if bounds is None:
+        return None
+    lo, hi = bounds
+    key = write.scene_key(scene, create=True)
+    probe = find_volume(scene)
+    if probe is None:
+        data = bpy.data.lightprobes.new(PROBE_NAME, "VOLUME")
+        probe = bpy.data.objects.new(PROBE_NAME, data)
+        scene.collection.objects.link(probe)
+        write._tag(probe, key)
+        write._tag(data, key)
+    size = np.maximum(hi - lo, 1e-3)
+    probe.location = tuple(map(float, (lo + hi) / 2))
+    probe.rotation_euler = (0.0, 0.0, 0.0)
+    probe.scale = tuple(map(float, size / 2 * MARGIN))
+    res = np.clip(np.ceil(size / spacing), 2, MAX_RESOLUTION).astype(int)
+    data = probe.data
+    data.resolution_x, data.resolution_y, data.resolution_z = map(int, res)
+    data.capture_emission = True
+    data.capture_indirect = True
+    data.capture_world = False
+    terms, constant = intensity_terms(scene, shares)
+    level = current_level(terms, constant)
+    data[BAKED_KEY] = level
+    if data.animation_data is not None:
+        for fc in list(data.animation_data.drivers):
+            data.animation_data.drivers.remove(fc)
+    if terms and level > 0:
+        parts = [f"{w!r} * {var} / {p0!r}" for var, _, p0, w in terms if p0 > 0]
+        expr = f"({' + '.join(parts)} + {constant!r}) / {level!r}"
+        write.add_driver(_IntensitySocket(data), expr,
+                         [(var, "LIGHT", light, "energy") for var, light, _, _ in terms])
+    return probe
+
+
+class _IntensitySocket:
+    """``write.add_driver`` drives a socket's ``default_value``; the probe's is ``intensity``."""
+
+    def __init__(self, data):
+        self.data = data
+
+    def driver_add(self, _path):
+        return self.data.driver_add("intensity")
+
+
+def remove_volume(scene) -> int:
+    probe = find_volume(scene)
+    if probe is None:
+        return 0
+    data = probe.data
+    bpy.data.objects.remove(probe)
+    if data is not None and data.users == 0:
+        bpy.data.lightprobes.remove(data)
+    return 1
