@@ -109,7 +109,10 @@ def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
     print(f"EEVEE with the baked volume {lit:.4f}")
     assert abs(lit - cycles) < 0.35 * abs(bare - cycles)
 
-    # the intensity follows the lamps: lamp A off leaves the others' share
+    # the intensity follows the lamps (a simple expression: farm-safe): lamp A off leaves the
+    # others' share
+    fc = probe.data.animation_data.drivers[0]
+    assert fc.driver.is_simple_expression and fc.driver.is_valid, fc.driver.expression
     assert probe.data.intensity == pytest.approx(1.0, abs=1e-6)
     shares = probe_mod.lamp_shares(
         importlib.import_module(PKG + ".operators.settings").last_result(scene),
