@@ -479,6 +479,7 @@ def main(argv=None):
     assert bpy.ops.relight.precompute(preset=args.preset) == {"FINISHED"}
     t_pre = time.perf_counter() - t0
     print(f"precompute {args.preset}: {t_pre:.1f} s", flush=True)
+    scene.relight.settle = False            # the spheres' shadows; settled ones measured apart
     setup_render(bpy)
     cover = coverage_masks(names, args.size)
 
@@ -603,6 +604,14 @@ def main(argv=None):
                         drag=drag(bpy, box, sn), cycles=cycles(f"s{n}"), eevee=eevee(f"s{n}"))
         print(n, speed[str(n)], flush=True)
         loads.append(os.getloadavg())
+        if n == counts[0]:                  # settled where they stand: Update ray-traces them
+            scene.relight.settle = True
+            wrap.reset()
+            t_settle = timed_update(bpy)
+            acc["SPHERES, settled"] = dict(bake=score(emit_bake(bpy, names)))
+            speed["settled"] = dict(update=t_settle, parts=dict(wrap.t), n=n)
+            print("settled", acc["SPHERES, settled"], speed["settled"], flush=True)
+            scene.relight.settle = False
         unwire()
 
     # Cycles' SVM stack: the largest sphere count that compiles, one object / both
@@ -769,6 +778,9 @@ def write_markdown(state, frames):
         row(f"SPHERES, {n} spheres", "numpy twin", a["twin"])
     row("SPHERES, 8 spheres, after drag + Update", "EMIT bake",
         acc["SPHERES 8, after drag + Update (re-solved)"]["bake"])
+    if "SPHERES, settled" in acc:
+        row(f"SPHERES, {speed['settled']['n']} spheres, settled where they stand (Update)",
+            "EMIT bake", acc["SPHERES, settled"]["bake"])
     gaps = ", ".join(f"{n}: {acc[f'SPHERES, {n} spheres']['gap']:.1e}" for n in counts)
     lines += ["", "Checks of the read-out: " + "; ".join(checks) + f"; EMIT bake vs numpy twin, "
               f"max |diff| x white per sphere count: {gaps} (where the shader compiles the "
@@ -823,6 +835,13 @@ def write_markdown(state, frames):
             f"{p.get('make_sphere_group', 0):.2f} s | {p.get('_wire_material', 0):.2f} s | "
             f"{1e3 * s['drag'][0]:.3f} ms ({1e3 * s['drag'][1]:.3f}) | {1 / s['drag'][0]:.0f} | "
             f"{render_cells(s, f's{n}')} |")
+    if "settled" in speed:
+        st = speed["settled"]
+        lines += ["", f"Settled (Settle Moving Shadows, on by default): the Update at rest "
+                  f"after inserting {st['n']} spheres each, which ray-traces both objects' real "
+                  f"shadows on every texel (core/relight/settled.py), took {st['update']:.2f} s "
+                  f"(its sync {st['parts'].get('sync', 0.0):.2f} s); the materials use them until "
+                  "an object moves, the spheres' after."]
     ex = speed["exact"]
     lines += ["", f"EXACT mode: the Update inserting both objects (a new solve at "
               f"`{args.preset}`, every map rewritten) took {ex['update']:.2f} s; the Update after "

@@ -217,7 +217,7 @@ class _PrecomputeRunner(RelightOperator):
         scene = context.scene
         from ..relight_addon.core.relight.diagnose import diagnose
         summary = write.write_results(context, data, read_report, solution)
-        moving = self._sync_spheres(context, read_report)
+        moving = self._sync_spheres(context, read_report, solution)
         for sentence in diagnose(solution, solution.photographed,
                                  lambda g: read_report.groups[g][0]):
             read_report.warn(sentence)
@@ -243,12 +243,17 @@ class _PrecomputeRunner(RelightOperator):
             self.report({'INFO'}, done)
         return {'FINISHED'}
 
-    def _sync_spheres(self, context, read_report):
+    def _sync_spheres(self, context, read_report, result=None):
         """The moving virtual objects' sphere shadows (fitted again only if their mesh or
-        sphere count changed; their transforms are followed by drivers)."""
+        sphere count changed; their transforms are followed by drivers), settled where they
+        stand (ray-traced with ``result``, the scene's last result) unless the scene's
+        setting says not to."""
         from ..relight_addon.blender import sphere_nodes
+        settings = getattr(context.scene, "relight", None)
         try:
-            return sphere_nodes.sync(context.scene, context.evaluated_depsgraph_get())
+            return sphere_nodes.sync(context.scene, context.evaluated_depsgraph_get(),
+                                     result=result,
+                                     settle_shadows=bool(getattr(settings, "settle", True)))
         except Exception as ex:
             read_report.warn(f"Moving objects' shadows could not be made: {user_message(ex)}")
             return {"objects": 0, "fitted": 0, "materials": 0}
@@ -347,7 +352,7 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
         if st and write.has_relight_data(scene) and st.get("preset") == preset \
                 and st.get("correction") == correction:
             if st.get("fingerprint") == scene_fingerprint(data):
-                moving = self._sync_spheres(context, report)
+                moving = self._sync_spheres(context, report, last_result(scene))
                 for w in report.warnings:
                     self.report({'WARNING'}, w)
                 if moving["fitted"] or moving["objects"]:

@@ -13,7 +13,7 @@ import uuid
 
 import bpy
 from bpy.app.handlers import persistent
-from bpy.props import EnumProperty
+from bpy.props import BoolProperty, EnumProperty
 
 STATUS = "relight_status"
 ROLE_PROPERTY = "relight_role"
@@ -126,6 +126,10 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
+    settle: BoolProperty(name="Settle Moving Shadows", default=True,
+                         description="On Update, ray-trace the moving objects' real shadows "
+                                     "where they stand; the materials use them until an "
+                                     "object moves (then its spheres' shadow)")
     overlay: EnumProperty(name="Overlay", items=OVERLAY_ITEMS, default="NONE",
                           update=update_overlay,
                           description="Draw the last precompute's radiosity elements or links "

@@ -108,6 +108,7 @@ class RELIGHT_PT_main(bpy.types.Panel):
             op.correction = settings.correction
             row.operator("relight.update", icon='FILE_REFRESH')
             layout.prop(settings, "overlay")
+            layout.prop(settings, "settle")
         lines = status_lines(context.scene)
         if lines:
             box = layout.box()

@@ -19,7 +19,14 @@ map image's alpha).  Nothing runs in Python at render time:
 
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
-needs Update (the spheres are fitted again).  The shadows fall on the relit surfaces only, the
+needs Update (the spheres are fitted again).
+
+Settled: where the objects stand when Update runs, their real triangles' shadows are ray-traced
+once (core/relight/settled.py) into ``"<photo>.relight.settled.<n>"`` images (four lamps per
+image, one channel each), and a ``"Relight Settled"`` group outputs 1 while every moving object
+keeps that transform (a driver comparing the ten transform channels of each): the materials then
+take the exact V_k instead of the spheres', and the spheres' again as soon as one moves.  The
+shadows fall on the relit surfaces only, the
 indirect light the object blocks or reflects is not modelled (the "Exact" mode does that, on
 Update), and an object's own appearance is lit as any object in the scene.
 """
@@ -30,9 +37,10 @@ import hashlib
 import bpy
 import numpy as np
 
+from ..core.relight.settled import object_visibility
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
-from .write import MAP_PREFIX, SHADOW_PREFIX, _ours, _tag, add_driver, scene_key
+from .write import MAP_PREFIX, SHADOW_PREFIX, _HalfWriter, _ours, _tag, add_driver, scene_key
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
@@ -46,6 +54,13 @@ SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPH
 COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
 DEFAULT_SPHERES = 32
 SQRT_PI = float(np.sqrt(np.pi))
+SETTLED_KEY = "relight_settled"        # on a settled image: its channels' lamps; on the group:
+SETTLED_FITS = "relight_settled_fits"  # the objects' fit hashes it was computed for
+SETTLED_GROUP = "Relight Settled"
+SETTLED_SUFFIX = ".relight.settled"
+TRANSFORM_CHANNELS = ("LOC_X", "LOC_Y", "LOC_Z", "ROT_W", "ROT_X", "ROT_Y", "ROT_Z",
+                      "SCALE_X", "SCALE_Y", "SCALE_Z")
+SETTLE_TOLERANCE = 1e-4                # sum of |transform - settled transform|
 
 
 def _prop(obj, name, default):
@@ -391,6 +406,94 @@ def _sphere_groups(key):
             if OBJECT_KEY in ng and ng.get("relight_scene") == key}
 
 
+# -- settled shadows ---------------------------------------------------------------------------
+
+def _transform_values(obj):
+    """The world transform channels as TRANSFORMS driver variables read them."""
+    loc, rot, scale = obj.matrix_world.decompose()
+    return [*loc, rot.w, rot.x, rot.y, rot.z, *scale]
+
+
+def _settled_group(key):
+    return next((ng for ng in bpy.data.node_groups
+                 if SETTLED_FITS in ng and ng.get("relight_scene") == key), None)
+
+
+def _settled_images(key):
+    return [im for im in bpy.data.images if SETTLED_KEY in im and _ours(im, key)]
+
+
+def drop_settled(key):
+    for im in _settled_images(key):
+        bpy.data.images.remove(im)
+    ng = _settled_group(key)
+    if ng is not None:
+        bpy.data.node_groups.remove(ng)
+
+
+def make_settled_group(objs, fits, key):
+    """A group whose output is 1 while every object of ``objs`` keeps its present transform."""
+    ng, _, gout = _new_group(SETTLED_GROUP, [], [("Settled", "NodeSocketFloat")], key)
+    ng[SETTLED_FITS] = dict(fits)
+    ng["relight_settled_run"] = hashlib.sha1(repr((sorted(fits.items()), [
+        _transform_values(o) for o in objs])).encode()).hexdigest()
+    ng.use_fake_user = True
+    # one driven value per object (a driver expression holds at most 256 characters), their
+    # minimum the output
+    out = None
+    for obj in objs:
+        flag = ng.nodes.new("ShaderNodeValue")
+        variables, terms = [], []
+        for name, what, value in zip("abcdefghij", TRANSFORM_CHANNELS, _transform_values(obj)):
+            variables.append((name, "TRANSFORMS", obj, what))
+            terms.append(f"abs({name}{-float(value):+.9g})")
+        add_driver(flag.outputs[0], f"({'+'.join(terms)})<{SETTLE_TOLERANCE!r}", variables)
+        if out is None:
+            out = flag.outputs[0]
+        else:
+            both = ng.nodes.new("ShaderNodeMath")
+            both.operation = "MINIMUM"
+            ng.links.new(out, both.inputs[0])
+            ng.links.new(flag.outputs[0], both.inputs[1])
+            out = both.outputs[0]
+    ng.links.new(out, gout.inputs["Settled"])
+    return ng
+
+
+def settle(scene, result, objs, fits, depsgraph, key, seed=0):
+    """Ray-trace the shadows of ``objs`` (at their present transforms) on every texel of
+    ``result`` (a texel-mode ShadowFreeResult of ``scene``'s last run) and write the settled
+    images and group; returns the group."""
+    drop_settled(key)
+    tris = []
+    for obj in objs:
+        t = object_triangles(obj, depsgraph)
+        M = np.array(obj.matrix_world)
+        tris.append(t @ M[:3, :3].T + M[:3, 3])
+    sc, tm = result.solution.scene, result.texel_map
+    V = object_visibility(sc, tm, np.concatenate(tris), seed=seed)
+    names = list(sc.lamp_names)
+    per_image = tm.scatter(V.astype(np.float32), fill=1.0)
+    writer = _HalfWriter(key)
+    try:
+        for i, v in enumerate(per_image):
+            if i not in result.maps or float(v.min(initial=1.0)) >= 0.999:
+                continue                   # nothing of this image is shadowed
+            src = sc.images[i].name
+            for g in range(0, len(names), 4):
+                chans = names[g:g + 4]
+                block = np.ones(v.shape[:2] + (4,), np.float32)
+                block[..., :len(chans)] = v[..., g:g + len(chans)]
+                img = writer.write(f"{src}{SETTLED_SUFFIX}.{g // 4}", block[..., :3],
+                                   block[..., 3])
+                img[SETTLED_KEY] = list(chans) + [""] * (4 - len(chans))
+                img["relight_settled_source"] = src
+                img.use_fake_user = True
+    finally:
+        writer.close()
+    return make_settled_group(objs, fits, key)
+
+
 # -- materials ---------------------------------------------------------------------------------
 
 def _lamp_terms(mat):
@@ -406,14 +509,34 @@ def _lamp_terms(mat):
     return out
 
 
-def _wire_material(mat, lamp_group_of, sphere_groups):
+def _settled_channel(settled_images, m_node, lname):
+    """(image, channel 0-3) holding lamp ``lname``'s settled V for the material whose map node
+    for that lamp is ``m_node``, or None."""
+    image = m_node.image
+    tail = f".relight.{lname}"
+    if image is None or not image.name.endswith(tail):
+        return None
+    src = image.name[:-len(tail)]
+    for im in settled_images:
+        if im.get("relight_settled_source") == src and lname in list(im[SETTLED_KEY]):
+            return im, list(im[SETTLED_KEY]).index(lname)
+    return None
+
+
+def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
     """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
-    (a rebuilt tree makes every engine compile the material's shader again)."""
+    (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
+    (settled group, settled images) or None."""
     tree = mat.node_tree
-    signature = repr(sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups))
+    settled_group, settled_images = settled if settled is not None else (None, [])
+    signature = repr((sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
+                      None if settled_group is None else
+                      (settled_group.get("relight_settled_run"),
+                       sorted(im.name for im in settled_images), sorted(lamp_group_of))))
     if mat.get(WIRING_KEY) == signature and all(
-            n.node_tree is not None for n in tree.nodes
-            if n.name.startswith(NODE_PREFIX) and n.bl_idname == "ShaderNodeGroup"):
+            getattr(n, "node_tree" if n.bl_idname == "ShaderNodeGroup" else "image") is not None
+            for n in tree.nodes if n.name.startswith(NODE_PREFIX)
+            and n.bl_idname in ("ShaderNodeGroup", "ShaderNodeTexImage")):
         return 1 if sphere_groups else 0
     mat[WIRING_KEY] = signature
     for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
@@ -459,6 +582,36 @@ def _wire_material(mat, lamp_group_of, sphere_groups):
                 tree.links.new(vis, mul.inputs[0])
                 tree.links.new(g.outputs[0], mul.inputs[1])
                 vis = mul.outputs[0]
+        if settled_group is not None:       # V + settled (V_exact - V)
+            flag = node("ShaderNodeGroup", "Settled", (x0 + 200, y + 120))
+            flag.node_tree = settled_group
+            found = _settled_channel(settled_images, m_node, lname)
+            diff = node("ShaderNodeMath", "Settled difference", (x0 + 420, y + 120))
+            diff.operation = "SUBTRACT"
+            if found is None:               # nothing of this material in the objects' shadow
+                diff.inputs[0].default_value = 1.0
+            else:
+                im, channel = found
+                tex = node("ShaderNodeTexImage", "Settled V", (x0 + 200, y + 300))
+                tex.image = im
+                tex.interpolation = m_node.interpolation
+                if m_node.inputs["Vector"].is_linked:
+                    tree.links.new(m_node.inputs["Vector"].links[0].from_socket,
+                                   tex.inputs["Vector"])
+                if channel == 3:
+                    exact = tex.outputs["Alpha"]
+                else:
+                    sep = node("ShaderNodeSeparateColor", "Settled channels", (x0 + 320, y + 300))
+                    tree.links.new(tex.outputs["Color"], sep.inputs[0])
+                    exact = sep.outputs[channel]
+                tree.links.new(exact, diff.inputs[0])
+            tree.links.new(vis, diff.inputs[1])
+            step = node("ShaderNodeMath", "Settled step", (x0 + 480, y + 120))
+            step.operation = "MULTIPLY_ADD"
+            tree.links.new(diff.outputs[0], step.inputs[0])
+            tree.links.new(flag.outputs["Settled"], step.inputs[1])
+            tree.links.new(vis, step.inputs[2])
+            vis = step.outputs[0]
         # 1 - a (1 - V): only the direct part (the map's alpha) is shadowed
         lost = node("ShaderNodeMath", "Lost", (x0 + 560, y))
         lost.operation = "SUBTRACT"
@@ -476,10 +629,12 @@ def _wire_material(mat, lamp_group_of, sphere_groups):
     return 1
 
 
-def sync(scene, depsgraph=None, seed=0) -> dict:
+def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
-    no longer moving, and wire every relit material.  Returns a summary."""
+    no longer moving, settle their shadows where they stand (with ``result``, the scene's last
+    ShadowFreeResult; without it the settled shadows are kept while the objects' meshes are the
+    same), and wire every relit material.  Returns a summary."""
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
@@ -503,7 +658,23 @@ def sync(scene, depsgraph=None, seed=0) -> dict:
         fitted += 1
     for stale in groups.values():
         bpy.data.node_groups.remove(stale)
+    objs = [bpy.data.objects[g[OBJECT_KEY]] for g in wanted]
+    fits = {g[OBJECT_KEY]: g[FIT_KEY] for g in wanted}
+    settled_group, settled_s = _settled_group(key), 0.0
+    if not wanted or not settle_shadows:
+        drop_settled(key)
+        settled_group = None
+    elif result is not None and getattr(result, "texel_map", None) is not None:
+        import time
+        t0 = time.perf_counter()
+        settled_group = settle(scene, result, objs, fits, depsgraph, key, seed)
+        settled_s = time.perf_counter() - t0
+    elif settled_group is not None and dict(settled_group[SETTLED_FITS]) != fits:
+        drop_settled(key)                  # meshes changed and no result to trace them again
+        settled_group = None
+    settled = None if settled_group is None else (settled_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if _ours(m, key) and m.node_tree is not None]
-    wired = sum(_wire_material(m, lamps, wanted) for m in mats)
-    return {"objects": len(wanted), "fitted": fitted, "materials": wired}
+    wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
+    return {"objects": len(wanted), "fitted": fitted, "materials": wired,
+            "settled": settled_group is not None, "settle_seconds": settled_s}
