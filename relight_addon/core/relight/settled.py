@@ -6,14 +6,18 @@ is computed once here and the relit materials use it while the object stays ther
 and lamp, V_k = E_k(past the objects) / E_k(unoccluded): the lamp's direct irradiance seen past
 the objects' triangles (and nothing else: the room's own shadows are in the maps already), the
 same quantity the spheres approximate, so the material's ``1 - a_k (1 - V_k)`` takes either.
+Only texels whose view of a lamp's bounding sphere can meet an object's bounding sphere are
+ray-traced (``may_be_shadowed``): the rest see every lamp whole.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..geometry.raycast import make_occluder
+from ..lights import AREA, SUN
 from ..scene import bilinear_point
 from ..texture.colour import LUMINANCE
+from ..texture.mapping import CoveredTexels, TexelMap
 from .texel import TexelLight
 
 RAYS = 32                  # per footprint point and lamp
@@ -28,18 +32,87 @@ def texel_points(scene, texel_map):
     return pts, scene.area_normal()[1][tm.patch]
 
 
+def _lamp_spheres(scene):
+    """[(lamp, centre, radius, sun direction or None, sun angular radius)]: a bounding sphere
+    of every light and emissive-face lamp (a sun: its direction and angular radius)."""
+    out = []
+    L = scene.lights
+    for i in range(len(L)):
+        if L.kind[i] == SUN:
+            out.append((int(L.lamp[i]), None, 0.0, L.axes[i][2], 0.5 * float(L.angle[i])))
+        elif L.kind[i] == AREA:
+            out.append((int(L.lamp[i]), L.position[i], 0.5 * float(np.hypot(*L.size[i])), None,
+                        0.0))
+        else:
+            out.append((int(L.lamp[i]), L.position[i], float(L.radius[i]), None, 0.0))
+    lamp = np.asarray(scene.lamp)
+    for k in np.unique(lamp[lamp >= 0]):
+        pts = scene.corners[lamp == k].reshape(-1, 3)
+        c = 0.5 * (pts.min(0) + pts.max(0))
+        out.append((int(k), c, float(np.linalg.norm(pts - c, axis=1).max()), None, 0.0))
+    return out
+
+
+def _angle(a, b):
+    cos = np.einsum("ij,ij->i", a, b) / np.maximum(
+        np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def may_be_shadowed(scene, texel_map, triangles, margin=1.25):
+    """(T,) bool, conservative: texels where some lamp's bounding sphere, seen from the texel
+    (grown by its footprint), can be hidden by the bounding sphere of ``triangles``."""
+    tri = np.asarray(triangles, float).reshape(-1, 3)
+    c = 0.5 * (tri.min(0) + tri.max(0))
+    x, _ = texel_points(scene, texel_map)
+    # a texel's footprint: the patch's area shared by its texels
+    patch = texel_map.patch
+    area = scene.area_normal()[0]
+    per = np.bincount(patch, minlength=len(area))
+    foot = np.sqrt(area[patch] / np.maximum(per[patch], 1))
+    R = margin * float(np.linalg.norm(tri - c, axis=1).max()) + foot
+    to_c = c - x
+    d_c = np.linalg.norm(to_c, axis=1)
+    half_obj = np.arcsin(np.clip(R / np.maximum(d_c, 1e-300), 0.0, 1.0))
+    out = d_c <= R
+    for _, centre, r, sun, sun_half in _lamp_spheres(scene):
+        if sun is not None:
+            out |= _angle(to_c, np.broadcast_to(sun, x.shape)) <= half_obj + sun_half
+            continue
+        to_l = centre - x
+        d_l = np.linalg.norm(to_l, axis=1)
+        half_lamp = np.arcsin(np.clip((r + foot) / np.maximum(d_l, 1e-300), 0.0, 1.0))
+        out |= (d_c - R < d_l) & (_angle(to_c, to_l) <= half_obj + half_lamp)
+    return out
+
+
+def _subset(texel_map, mask):
+    images, start = [], 0
+    for im in texel_map.images:
+        m = mask[start:start + len(im)]
+        start += len(im)
+        images.append(CoveredTexels(im.shape, im.texel_index[m], im.patch[m], im.u[m], im.v[m],
+                                    im.coverage))
+    return TexelMap(images)
+
+
 def object_visibility(scene, texel_map, triangles, rays=RAYS, samples=SAMPLES,
                       seed=0) -> np.ndarray:
     """(T, k) part of each lamp's direct light on the texels of ``texel_map`` (averaged over
     each texel's footprint, as a photo texel and the maps average it) that passes the
-    ``triangles`` (t, 3, 3, world); 1 where a lamp gives no light."""
+    ``triangles`` (t, 3, 3, world); 1 where a lamp gives no light or cannot be hidden."""
     T, k = texel_map.n_texels, scene.n_lamps
+    V = np.ones((T, k))
     if T == 0 or len(triangles) == 0:
-        return np.ones((T, k))
+        return V
+    mask = may_be_shadowed(scene, texel_map, triangles)
+    if not mask.any():
+        return V
     occluder = make_occluder(np.asarray(triangles, float))
-    U, O = TexelLight(scene, texel_map, occluder, rays, samples, seed).direct()
+    U, O = TexelLight(scene, _subset(texel_map, mask), occluder, rays, samples, seed).direct()
     u, o = U @ LUMINANCE, O @ LUMINANCE
     lit = u > UNLIT * max(float(u.max(initial=0.0)), 1e-300)
-    V = np.ones((T, k))
-    V[lit] = np.clip(o[lit] / u[lit], 0.0, 1.0)
+    sub = np.ones(u.shape)
+    sub[lit] = np.clip(o[lit] / u[lit], 0.0, 1.0)
+    V[mask] = sub
     return V
