@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies, eevee, lamps, precompute, settings, unwrap
+from . import dependencies, eevee, lamps, precompute, settings, settle, unwrap
 
-_modules = (settings, dependencies, precompute, unwrap, lamps, eevee)
+_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
@@ -15,8 +15,10 @@ _register, _unregister = bpy.utils.register_classes_factory(classes)
 def register():
     _register()
     settings.attach()
+    settle.attach()
 
 
 def unregister():
+    settle.detach()
     settings.detach()
     _unregister()

@@ -581,3 +581,40 @@ def _pixels_rgba(img):
     px = np.empty(len(img.pixels), np.float32)
     img.pixels.foreach_get(px)
     return px.reshape(img.size[1], img.size[0], 4)
+
+
+def test_a_drag_settles_when_it_stops():
+    """In the UI a depsgraph handler notes a moving object's transform change and a timer
+    traces its shadow once it stood still for STILL seconds (here the timer's function is
+    called with a chosen clock: background mode has no event loop, and the handler stays out
+    of it).  After the drag the settled flag is 0 (spheres); once settled, 1 at the new place,
+    with the settled image traced there."""
+    _addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey(spheres=4)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    sn = _nodes()
+    settle = importlib.import_module(PKG + ".operators.settle")
+
+    def flag():
+        g = next(g for g in bpy.data.node_groups if sn.SETTLED_FITS in g)
+        return g.nodes["Value"].outputs[0].default_value
+
+    before = _pixels_rgba(bpy.data.images["Floor_mat_img.relight.settled.0"])[..., 0].copy()
+    assert flag() == 1.0 and not settle.unsettled(scene)
+    monkey.location.x += 0.6                      # the drag
+    bpy.context.view_layer.update()
+    assert flag() == 0.0 and settle.unsettled(scene)
+    settle._pending[scene.name] = 100.0           # the handler's note of the last change
+    assert settle._tick(now=100.0 + 0.5 * settle.STILL) == settle.POLL    # still moving
+    assert flag() == 0.0
+    assert settle._tick(now=100.0 + 2 * settle.STILL) is None            # stood still: settle
+    bpy.context.view_layer.update()               # (the UI's next redraw evaluates the drivers)
+    assert flag() == 1.0 and not settle.unsettled(scene)
+    after = _pixels_rgba(bpy.data.images["Floor_mat_img.relight.settled.0"])[..., 0]
+    assert np.abs(after - before).max() > 0.3     # the shadow moved with it
+    assert bpy.data.objects["Floor"].material_slots[0].material.node_tree.nodes[
+        "S LampA"].inputs["Scale"].is_linked

@@ -414,6 +414,12 @@ def _transform_values(obj):
     return [*loc, rot.w, rot.x, rot.y, rot.z, *scale]
 
 
+def settled_run(objs) -> str:
+    """A key of the objects' present transforms (what a settled shadow was traced at)."""
+    return hashlib.sha1(repr([(o.name, [round(v, 6) for v in _transform_values(o)])
+                              for o in objs]).encode()).hexdigest()
+
+
 def _settled_group(key):
     return next((ng for ng in bpy.data.node_groups
                  if SETTLED_FITS in ng and ng.get("relight_scene") == key), None)
@@ -435,8 +441,7 @@ def make_settled_group(objs, fits, key):
     """A group whose output is 1 while every object of ``objs`` keeps its present transform."""
     ng, _, gout = _new_group(SETTLED_GROUP, [], [("Settled", "NodeSocketFloat")], key)
     ng[SETTLED_FITS] = dict(fits)
-    ng["relight_settled_run"] = hashlib.sha1(repr((sorted(fits.items()), [
-        _transform_values(o) for o in objs])).encode()).hexdigest()
+    ng["relight_settled_run"] = settled_run(objs)
     ng.use_fake_user = True
     # one driven value per object (a driver expression holds at most 256 characters), their
     # minimum the output

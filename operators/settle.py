@@ -1,0 +1,105 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Settle moving objects' shadows when a drag stops (issue 11), in the UI.
+
+While an object is dragged its shadow comes from its spheres (drivers: no Python).  A depsgraph
+handler notes when a moving object's transform differs from the one its settled shadow was
+traced at; a timer then waits until no such change came for ``STILL`` seconds and runs what
+Update's fast path runs (``sphere_nodes.sync`` with the scene's last result), which traces the
+shadow where the object now stands.  Not in background mode (scripts and farms call Update).
+Nothing happens without a last result in memory (after a reload: press Update).
+"""
+
+import time
+
+import bpy
+from bpy.app.handlers import persistent
+
+STILL = 0.5             # s without a transform change before settling
+POLL = 0.2              # s between the timer's checks
+
+_pending = {}           # scene name -> time of the last transform change seen
+
+
+def _modules():
+    from ..relight_addon.blender import sphere_nodes, write
+    from . import precompute, settings
+    return sphere_nodes, write, precompute, settings
+
+
+def unsettled(scene) -> bool:
+    """Whether a moving object of ``scene`` stands elsewhere than its settled shadow."""
+    sphere_nodes, write, _, settings = _modules()
+    if not getattr(getattr(scene, "relight", None), "settle", False):
+        return False
+    if settings.last_result(scene) is None:
+        return False
+    key = write.scene_key(scene)
+    objs = sphere_nodes.moving_objects(scene)
+    if key is None or not objs:
+        return False
+    group = sphere_nodes._settled_group(key)
+    return group is None or group.get("relight_settled_run") != sphere_nodes.settled_run(objs)
+
+
+def settle_now(scene) -> bool:
+    """Trace ``scene``'s moving objects' shadows where they stand; False when nothing ran."""
+    sphere_nodes, _, precompute, settings = _modules()
+    if precompute.solve_running() or not unsettled(scene):
+        return False
+    sphere_nodes.sync(scene, bpy.context.evaluated_depsgraph_get(),
+                      result=settings.last_result(scene), settle_shadows=True)
+    return True
+
+
+def _tick(now=None):
+    """Timer: settle the scenes whose objects stood still for STILL seconds."""
+    now = time.monotonic() if now is None else now
+    for name, t in list(_pending.items()):
+        if now - t < STILL:
+            continue
+        del _pending[name]
+        scene = bpy.data.scenes.get(name)
+        if scene is not None:
+            try:
+                settle_now(scene)
+            except Exception as ex:          # a timer must not raise; the spheres stay
+                print(f"Relight: the moving shadows could not be settled: {ex}")
+    return POLL if _pending else None
+
+
+@persistent
+def _watch(scene, depsgraph=None):
+    if bpy.app.background or not depsgraph_moves(scene, depsgraph):
+        return
+    _pending[scene.name] = time.monotonic()
+    if not bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.register(_tick, first_interval=POLL)
+
+
+def depsgraph_moves(scene, depsgraph) -> bool:
+    """A moving object's transform changed in this update and its shadow is not settled."""
+    if depsgraph is not None:
+        moved = {u.id.original.name for u in depsgraph.updates
+                 if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
+        if not moved:
+            return False
+    try:
+        return unsettled(scene)
+    except Exception:
+        return False
+
+
+def attach():
+    if _watch not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_watch)
+
+
+def detach():
+    if _watch in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_watch)
+    if bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.unregister(_tick)
+    _pending.clear()
+
+
+classes = ()
