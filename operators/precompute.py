@@ -251,9 +251,12 @@ class _PrecomputeRunner(RelightOperator):
         from ..relight_addon.blender import sphere_nodes
         settings = getattr(context.scene, "relight", None)
         try:
-            return sphere_nodes.sync(context.scene, context.evaluated_depsgraph_get(),
-                                     result=result,
-                                     settle_shadows=bool(getattr(settings, "settle", True)))
+            summary = sphere_nodes.sync(context.scene, context.evaluated_depsgraph_get(),
+                                        result=result,
+                                        settle_shadows=bool(getattr(settings, "settle", True)))
+            for w in summary.get("warnings", ()):
+                read_report.warn(w)
+            return summary
         except Exception as ex:
             read_report.warn(f"Moving objects' shadows could not be made: {user_message(ex)}")
             return {"objects": 0, "fitted": 0, "materials": 0}

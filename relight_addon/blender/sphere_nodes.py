@@ -61,6 +61,9 @@ SETTLED_SUFFIX = ".relight.settled"
 TRANSFORM_CHANNELS = ("LOC_X", "LOC_Y", "LOC_Z", "ROT_W", "ROT_X", "ROT_Y", "ROT_Z",
                       "SCALE_X", "SCALE_Y", "SCALE_Z")
 SETTLE_TOLERANCE = 1e-4                # sum of |transform - settled transform|
+# Sphere tests (lamps x spheres of all moving objects) per relit material that EEVEE compiled in
+# benchmarks/results/moving_objects.md (2 lamps x 2 x 32; 2 x 2 x 128 rendered magenta).
+EEVEE_SPHERE_TESTS = 128
 
 
 def _prop(obj, name, default):
@@ -681,5 +684,14 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if _ours(m, key) and m.node_tree is not None]
     wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
+    tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
+    warnings = []
+    if tests > EEVEE_SPHERE_TESTS:
+        warnings.append(
+            f"Moving objects: {tests} sphere tests in every relit material ({len(lamps)} lamps x "
+            f"{tests // max(len(lamps), 1)} spheres); EEVEE may fail to compile that many "
+            f"(measured: {EEVEE_SPHERE_TESTS} compile, 512 do not) and Cycles renders slow "
+            "down with the count: lower the objects' Spheres")
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
-            "settled": settled_group is not None, "settle_seconds": settled_s}
+            "settled": settled_group is not None, "settle_seconds": settled_s,
+            "warnings": warnings}
