@@ -83,7 +83,10 @@ def _json_safe(x):
 # -- report -------------------------------------------------------------------------------------
 
 def _off_rows(sc):
-    """(label, row) of the lamp-off targets (each lamp off, and all but one off)."""
+    """(label, row) of the lamp-off targets (each lamp off, and all but one off); none in a
+    one-lamp room, where switching it off leaves black against black."""
+    if len(sc.get("lamps", ())) < 2:
+        return []
     return [(k, v) for k, v in sc["targets"].items() if k.endswith(" off") or k.startswith("only")]
 
 
@@ -103,7 +106,12 @@ def room_figures(sc):
     (and p95), plus the doubled targets' overall mean."""
     rows = _off_rows(sc)
     fig = {}
+    nan = float("nan")
     for m in ("relit", "drb97", "scale", "photo"):
+        if not rows:
+            if m in sc["targets"]["original"]:
+                fig[m] = dict(all=nan, all_p95=nan, shadow=nan, shadow_p95=nan, worst_target=nan)
+            continue
         if m not in rows[0][1]:
             continue
         fig[m] = {
@@ -134,7 +142,10 @@ def write_report(raw, path_md, path_png):
              "Noise floor: photo vs truth at the photo's own lighting (two independent bakes); "
              "'orig': the relit result at the photo's lighting vs the truth (target: within the "
              "floor + 0.3; '-' where the room was last run before that column existed).  "
-             f"Rooms {fam.HELD_OUT} are held out from tuning.", ""]
+             f"Rooms {fam.HELD_OUT} are held out from tuning; rooms {fam.TEST_ROOMS} are the "
+             "test suite's small rooms (32 texels per surface, bakes in tests/data/family/), "
+             "reported apart and in the all-rooms row.  A one-lamp room has no lamp-off figure (black "
+             "against black): its doubled lamp and its original lighting are scored.", ""]
     for preset in PRESETS:
         key = f"exact/{preset}"
         have = [r for r in rooms if key in raw[r]]
@@ -147,7 +158,8 @@ def write_report(raw, path_md, path_png):
         for r in have:
             sc = raw[r][key]
             f = room_figures(sc)
-            held = " (held out)" if int(r) in fam.HELD_OUT else ""
+            held = (" (held out)" if int(r) in fam.HELD_OUT else
+                     " (test room, 32 texels)" if int(r) in fam.TEST_ROOMS else "")
             d = f.get("drb97", {"all": np.nan, "shadow": np.nan})
             lines.append(
                 f"| {r}{held} | {len(sc['lamps'])} | {sc['floor'][0]:.2f} | "
@@ -156,9 +168,13 @@ def write_report(raw, path_md, path_png):
                 f"{f['doubled']:.2f} | {d['all']:.2f} / {d['shadow']:.2f} | "
                 f"{f['scale']['all']:.2f} / {f['scale']['shadow']:.2f} | "
                 f"{f['photo']['all']:.2f} / {f['photo']['shadow']:.2f} | "
-                f"{sc['ratio_error']:.3f} | {sc['rho_mean']:.2f} | {sc['seconds']:.1f} s |")
-        for label, sel in (("tuning rooms", [r for r in have if int(r) not in fam.HELD_OUT]),
-                           ("held-out rooms", [r for r in have if int(r) in fam.HELD_OUT])):
+                f"{sc['ratio_error']:.3f} | {sc['rho_mean']:.2f} | {sc['seconds']:.1f} s |"
+                .replace("nan", "-"))
+        full = [r for r in have if int(r) not in fam.TEST_ROOMS]
+        for label, sel in (("tuning rooms", [r for r in full if int(r) not in fam.HELD_OUT]),
+                           ("held-out rooms", [r for r in full if int(r) in fam.HELD_OUT]),
+                           ("test rooms", [r for r in have if int(r) in fam.TEST_ROOMS]),
+                           (f"all {len(have)} rooms", have)):
             if not sel:
                 continue
             figs = [room_figures(raw[r][key]) for r in sel]
@@ -168,19 +184,35 @@ def write_report(raw, path_md, path_png):
             orig = [f["original"] for f in figs if np.isfinite(f["original"])]
             excess = [f["original"] - raw[r][key]["floor"][0] for r, f in zip(sel, figs)
                       if np.isfinite(f["original"])]
+            rel_all = [x for x in rel_all if np.isfinite(x)] or [np.nan]
             lines.append(f"| **{label}: mean (worst)** | | {np.mean(floor):.2f} | "
                          + (f"{np.mean(orig):.2f} (floor +{np.max(excess):.2f}) | " if orig
                             else "- | ") +
                          f"**{np.mean(rel_all):.2f} ({np.max(rel_all):.2f}) / "
                          f"{np.nanmean(rel_sh):.2f} ({np.nanmax(rel_sh):.2f})** | "
                          f"{np.mean([f['doubled'] for f in figs]):.2f} | "
-                         f"{np.mean([f['drb97']['all'] for f in figs if 'drb97' in f]):.2f} / "
+                         f"{np.nanmean([f['drb97']['all'] for f in figs if 'drb97' in f]):.2f} / "
                          f"{np.nanmean([f['drb97']['shadow'] for f in figs if 'drb97' in f]):.2f} | "
-                         f"{np.mean([f['scale']['all'] for f in figs]):.2f} / "
+                         f"{np.nanmean([f['scale']['all'] for f in figs]):.2f} / "
                          f"{np.nanmean([f['scale']['shadow'] for f in figs]):.2f} | "
-                         f"{np.mean([f['photo']['all'] for f in figs]):.2f} | | | "
+                         f"{np.nanmean([f['photo']['all'] for f in figs]):.2f} | | | "
                          f"{np.mean([raw[r][key]['seconds'] for r in sel]):.1f} s |")
         lines.append("")
+    # presets ordered per room: where a preset is worse than the one below it
+    worse = []
+    for lo, hi in zip(PRESETS, PRESETS[1:]):
+        for r in rooms:
+            a, b = raw[r].get(f"exact/{lo}"), raw[r].get(f"exact/{hi}")
+            if a is None or b is None:
+                continue
+            fa, fb = room_figures(a), room_figures(b)
+            for part in ("all", "shadow"):
+                x, y = fa["relit"][part], fb["relit"][part]
+                if np.isfinite(x) and np.isfinite(y) and y > x + 0.05:
+                    worse.append(f"room {r} {hi} vs {lo} ({part}): {y:.2f} vs {x:.2f}")
+    lines += ["Presets per room: a preset worse than the one below it by more than 0.05 on a "
+              "room's lamp-off mean, overall or in the former shadows: "
+              + ("; ".join(worse) if worse else "none") + ".", ""]
     lines += ["## Lamp exitance ratios (medium)", "",
               "Largest relative error of a lamp's exitance against the others' (its factor x the "
               "power it was set to, against its true power), with the lights' powers exact, 30 % "
@@ -235,7 +267,7 @@ def _plot(raw, path):
         if not sel:
             continue
         t = np.mean([raw[r][k]["seconds"] for r in sel])
-        e = np.mean([room_figures(raw[r][k])["relit"]["all"] for r in sel])
+        e = np.nanmean([room_figures(raw[r][k])["relit"]["all"] for r in sel])
         s = np.nanmean([room_figures(raw[r][k])["relit"]["shadow"] for r in sel])
         axes[1].plot([t], [e], mk, color="C0", label=f"{preset}: all")
         axes[1].plot([t], [s], mk, color="C3", label=f"{preset}: former shadows")
@@ -260,8 +292,7 @@ def main(argv=None):
         from scenes import family as fam
         from scenes.addon import register_repo_addon
         register_repo_addon()
-        rooms = args.rooms if args.rooms else [r for r in fam.baked_rooms()
-                                               if r not in fam.TEST_ROOMS]
+        rooms = args.rooms if args.rooms else fam.baked_rooms()
         for r in rooms:
             got = run_room(r, args.presets.split(","), args.powers.split(","),
                            lambda s: print(s, flush=True))
