@@ -53,8 +53,8 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
         if probe is None:
             self.report({'ERROR'}, "Relight: no relit surface in this scene")
             return {'CANCELLED'}
-        r = probe.data
-        count = r.resolution_x * r.resolution_y * r.resolution_z
+        rx, ry, rz = eevee_probe.resolution(probe.data)
+        count = rx * ry * rz
         if not self.bake:
             self.report({'INFO'}, f"Relight: irradiance volume placed ({count} samples)")
             return {'FINISHED'}

@@ -7,6 +7,8 @@ def grey_diffuse(bpy, name="grey", albedo=0.5):
     mat = bpy.data.materials.get(name)
     if mat is None:
         mat = bpy.data.materials.new(name)
+        if mat.node_tree is None:            # Blender before 5.0: no node tree by default
+            mat.use_nodes = True
         bsdf = mat.node_tree.nodes["Principled BSDF"]
         bsdf.inputs["Base Color"].default_value = (albedo, albedo, albedo, 1.0)
         bsdf.inputs["Roughness"].default_value = 1.0

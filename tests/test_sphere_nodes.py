@@ -95,6 +95,8 @@ def _bake(obj, mat):
 def _emit_material(name, source):
     """A material emitting what ``source(tree)`` returns (a socket)."""
     mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:                 # Blender before 5.0
+        mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
@@ -444,6 +446,8 @@ def _direct_bake(obj, samples=256):
     scene.cycles.seed = 0
     old = obj.material_slots[0].material
     mat = bpy.data.materials.new("direct_bake_white")
+    if mat.node_tree is None:                 # Blender before 5.0
+        mat.use_nodes = True
     img = bpy.data.images.new("direct_bake", 16, 16, float_buffer=True)
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
     tex.image = img

@@ -99,10 +99,11 @@ def fit_volume(scene, shares, spacing=SPACING):
     probe.scale = tuple(map(float, size / 2 * MARGIN))
     res = np.clip(np.ceil(size / spacing), 2, MAX_RESOLUTION).astype(int)
     data = probe.data
-    data.resolution_x, data.resolution_y, data.resolution_z = map(int, res)
-    data.capture_emission = True
-    data.capture_indirect = True
-    data.capture_world = False
+    for axis, n in zip("xyz", res):
+        _set(data, f"resolution_{axis}", int(n))
+    _set(data, "capture_emission", True)
+    _set(data, "capture_indirect", True)
+    _set(data, "capture_world", False)
     terms, constant = intensity_terms(scene, shares)
     level = current_level(terms, constant)
     data[BAKED_KEY] = level
@@ -127,12 +128,11 @@ class _IntensitySocket:
         return self.data.driver_add("intensity")
 
 
-def remove_volume(scene) -> int:
-    probe = find_volume(scene)
-    if probe is None:
-        return 0
-    data = probe.data
-    bpy.data.objects.remove(probe)
-    if data is not None and data.users == 0:
-        bpy.data.lightprobes.remove(data)
-    return 1
+def _set(data, name, value):
+    """Blender 4.3+ names a volume's settings ``name`` (LightProbeVolume); 4.2 ``grid_<name>``."""
+    setattr(data, name if hasattr(data, name) else f"grid_{name}", value)
+
+
+def resolution(data):
+    return tuple(getattr(data, f"resolution_{a}", None) or getattr(data, f"grid_resolution_{a}")
+                 for a in "xyz")
