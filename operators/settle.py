@@ -20,6 +20,7 @@ POLL = 0.2              # s between the timer's checks
 _pending = {}           # scene name -> time of the last transform change seen
 
 
+
 def _modules():
     from ..relight_addon.blender import sphere_nodes, write
     from . import precompute, settings
@@ -34,17 +35,26 @@ def unsettled(scene) -> bool:
     if settings.last_result(scene) is None:
         return False
     key = write.scene_key(scene)
-    objs = sphere_nodes.moving_objects(scene)
+    fitted = sphere_nodes._sphere_groups(key) if key is not None else {}
+    objs = [o for o in sphere_nodes.moving_objects(scene) if o.name in fitted]   # as sync's
     if key is None or not objs:
         return False
     group = sphere_nodes._settled_group(key)
     return group is None or group.get("relight_settled_run") != sphere_nodes.settled_run(objs)
 
 
+def _job_running(kind) -> bool:
+    try:
+        return bool(bpy.app.is_job_running(kind))
+    except (TypeError, ValueError):      # a job type this Blender does not know
+        return False
+
+
 def settle_now(scene) -> bool:
     """Trace ``scene``'s moving objects' shadows where they stand; False when nothing ran."""
     sphere_nodes, _, precompute, settings = _modules()
-    if precompute.solve_running() or not unsettled(scene):
+    busy = _job_running("RENDER") or _job_running("OBJECT_BAKE")
+    if busy or precompute.solve_running() or not unsettled(scene):
         return False
     sphere_nodes.sync(scene, bpy.context.evaluated_depsgraph_get(),
                       result=settings.last_result(scene), settle_shadows=True)
@@ -79,9 +89,11 @@ def _watch(scene, depsgraph=None):
 def depsgraph_moves(scene, depsgraph) -> bool:
     """A moving object's transform changed in this update and its shadow is not settled."""
     if depsgraph is not None:
+        sphere_nodes = _modules()[0]
+        moving = {o.name for o in sphere_nodes.moving_objects(scene)}
         moved = {u.id.original.name for u in depsgraph.updates
                  if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
-        if not moved:
+        if not moved & moving:
             return False
     try:
         return unsettled(scene)

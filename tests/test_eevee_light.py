@@ -127,6 +127,9 @@ def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
     bpy.data.lights["LampA"].energy = LAMPS["LampA"][1]
     bpy.context.view_layer.update()
 
+    # a new Precompute keeps the volume and its bake (only Clear removes it)
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    assert probe_mod.find_volume(scene) is not None
     # a second run refits the same volume; Clear removes it with its data
     assert bpy.ops.relight.eevee_light(spacing=0.5, bake=False) == {"FINISHED"}
     assert len([o for o in scene.objects if o.type == "LIGHT_PROBE"]) == 1

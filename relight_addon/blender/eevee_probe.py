@@ -111,8 +111,10 @@ def fit_volume(scene, shares, spacing=SPACING):
         for fc in list(data.animation_data.drivers):
             data.animation_data.drivers.remove(fc)
     if terms and level > 0:
-        parts = [f"{w!r} * {var} / {p0!r}" for var, _, p0, w in terms if p0 > 0]
-        expr = f"({' + '.join(parts)} + {constant!r}) / {level!r}"
+        # one coefficient per lamp (w / (P0 level)), 6 digits: a driver expression holds 255
+        # characters, ~16 lamps this way
+        parts = [f"{w / (p0 * level):.6g}*{var}" for var, _, p0, w in terms if p0 > 0]
+        expr = "+".join(parts + ([f"{constant / level:.6g}"] if constant > 0 else []))
         write.add_driver(_IntensitySocket(data), expr,
                          [(var, "LIGHT", light, "energy") for var, light, _, _ in terms])
     return probe

@@ -414,7 +414,7 @@ def _sphere_groups(key):
 def _transform_values(obj):
     """The world transform channels as TRANSFORMS driver variables read them."""
     loc, rot, scale = obj.matrix_world.decompose()
-    return [*loc, rot.w, rot.x, rot.y, rot.z, *scale]
+    return [*loc, rot.w, rot.x, rot.y, rot.z, *map(abs, scale)]     # drivers read lengths
 
 
 def settled_run(objs) -> str:
@@ -672,6 +672,9 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
     if not wanted or not settle_shadows:
         drop_settled(key)
         settled_group = None
+    elif (settled_group is not None and dict(settled_group[SETTLED_FITS]) == fits
+          and settled_group.get("relight_settled_run") == settled_run(objs)):
+        pass                               # nothing moved or changed since the last trace
     elif result is not None and getattr(result, "texel_map", None) is not None:
         import time
         t0 = time.perf_counter()

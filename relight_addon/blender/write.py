@@ -412,7 +412,7 @@ def restore_originals(scene) -> int:
     return count
 
 
-def clear_relight_data(scene) -> dict:
+def clear_relight_data(scene, keep_volume=False) -> dict:
     """Restore ``scene``'s originals, then remove the materials and images generated for it (and
     generated ones nothing uses any more, e.g. copies made by a Full Copy of the scene) and the
     stored powers of its lights.  Other scenes' results and the user's data are untouched."""
@@ -427,7 +427,7 @@ def clear_relight_data(scene) -> dict:
     groups = [g for g in bpy.data.node_groups if _ours(g, key)]    # lamp and sphere groups
     for g in groups:
         bpy.data.node_groups.remove(g)
-    for obj in [o for o in bpy.data.objects if _ours(o, key)]:      # EEVEE's irradiance volume
+    for obj in [o for o in bpy.data.objects if _ours(o, key) and not keep_volume]:  # EEVEE's volume
         data = obj.data
         bpy.data.objects.remove(obj)
         if isinstance(data, bpy.types.LightProbe) and data.users == 0:
@@ -484,7 +484,7 @@ def write_results(context, scene_data, report, solution) -> dict:
     scene = context.scene
     warnings = []
     key = scene_key(scene, create=True)
-    clear_relight_data(scene)
+    clear_relight_data(scene, keep_volume=True)     # its bake is the user's to redo or keep
 
     # Lamps, in the result's order (its maps' order): light data and the power each map is
     # computed at (P0 of the driver p / P0).
