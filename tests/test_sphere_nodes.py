@@ -53,6 +53,19 @@ def _monkey(spheres=8, location=(-0.9, -0.6, 0.9)):
     return obj
 
 
+def _inserted_monkey(spheres):
+    """The test room precomputed at draft, Suzanne inserted as a moving object by Update:
+    (scene, Suzanne)."""
+    _addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey(spheres=spheres)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    return scene, monkey
+
+
 @pytest.fixture(scope="module")
 def room():
     _addon()
@@ -471,9 +484,7 @@ def _direct_bake(obj, samples=256):
 
 
 def _alpha_free(img):
-    px = np.empty(len(img.pixels), np.float32)
-    img.pixels.foreach_get(px)
-    return px.reshape(img.size[1], img.size[0], 4)[..., :3].mean(-1)
+    return _pixels_rgba(img)[..., :3].mean(-1)
 
 
 def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
@@ -481,13 +492,7 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     direct light on the floor with and without Suzanne (lamp A alone), the settled V is closer
     than the spheres' (measured: mean |error| in the shadow 0.03 vs 0.1); the floor's material
     uses it while Suzanne stays, and the spheres' shadow after a 1 cm move (no Update)."""
-    _addon()
-    build_scene()
-    scene = bpy.context.scene
-    scene.relight.preset = "draft"
-    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    monkey = _monkey(spheres=8)
-    assert bpy.ops.relight.update() == {"FINISHED"}
+    scene, monkey = _inserted_monkey(spheres=8)
     sn = _nodes()
     floor = bpy.data.objects["Floor"]
     mat = floor.material_slots[0].material
@@ -597,13 +602,7 @@ def test_a_drag_settles_when_it_stops():
     called with a chosen clock: background mode has no event loop, and the handler stays out
     of it).  After the drag the settled flag is 0 (spheres); once settled, 1 at the new place,
     with the settled image traced there."""
-    _addon()
-    build_scene()
-    scene = bpy.context.scene
-    scene.relight.preset = "draft"
-    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    monkey = _monkey(spheres=4)
-    assert bpy.ops.relight.update() == {"FINISHED"}
+    scene, monkey = _inserted_monkey(spheres=4)
     sn = _nodes()
     settle = importlib.import_module(PKG + ".operators.settle")
 
