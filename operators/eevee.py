@@ -56,7 +56,10 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
         rx, ry, rz = eevee_probe.resolution(probe.data)
         count = rx * ry * rz
         if not self.bake:
-            self.report({'INFO'}, f"Relight: irradiance volume placed ({count} samples)")
+            # the driver refers the intensity to the lamps as they are now (BAKED_KEY)
+            self.report({'INFO'}, f"Relight: irradiance volume placed ({count} samples); bake "
+                                  "it before changing the lamps (its intensity follows them "
+                                  "from their present powers)")
             return {'FINISHED'}
         # Blender's own bake: a job with progress and cancel in the UI, blocking in background
         how = 'EXEC_DEFAULT' if bpy.app.background else 'INVOKE_DEFAULT'

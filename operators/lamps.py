@@ -58,6 +58,11 @@ def match_lamp_powers(scene):
         for fc, var in _power_drivers(light):
             fc.driver.expression = f"{var} / {new!r}"
         changed.append(name)
+    if changed:
+        from ..relight_addon.blender import eevee_probe
+        probe = eevee_probe.find_volume(scene)
+        if probe is not None:      # its driver divides by the old powers
+            eevee_probe.drive_intensity(scene, probe.data)
     st = dict(st)
     st["exitance_scale"] = [1.0 / math.pi if n in changed else s
                             for n, s in zip(st["lamps"], st["exitance_scale"])]

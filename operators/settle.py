@@ -3,7 +3,8 @@
 
 While an object is dragged its shadow comes from its spheres (drivers: no Python).  A depsgraph
 handler notes when a moving object's transform differs from the one its settled shadow was
-traced at; a timer then waits until no such change came for ``STILL`` seconds and runs what
+traced at; a timer then waits until no such change came for ``STILL`` seconds and no transform
+is running (a mouse that pauses mid-drag must not freeze it for a trace) and runs what
 Update's fast path runs (``sphere_nodes.sync`` with the scene's last result), which traces the
 shadow where the object now stands.  Not in background mode (scripts and farms call Update).
 Nothing happens without a last result in memory (after a reload: press Update).
@@ -35,11 +36,11 @@ def unsettled(scene) -> bool:
     if settings.last_result(scene) is None:
         return False
     key = write.scene_key(scene)
-    fitted = sphere_nodes._sphere_groups(key) if key is not None else {}
+    fitted = sphere_nodes.sphere_groups(key) if key is not None else {}
     objs = [o for o in sphere_nodes.moving_objects(scene) if o.name in fitted]   # as sync's
     if key is None or not objs:
         return False
-    group = sphere_nodes._settled_group(key)
+    group = sphere_nodes.settled_group(key)
     return group is None or group.get("relight_settled_run") != sphere_nodes.settled_run(objs)
 
 
@@ -50,22 +51,46 @@ def _job_running(kind) -> bool:
         return False
 
 
+def dragging() -> bool:
+    """A transform (grab, rotate, scale) is running in some window: the mouse may only pause."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in (wm.windows if wm is not None else ()):
+        for op in getattr(window, "modal_operators", ()):   # Blender 4.2+
+            if op.bl_idname.startswith(("TRANSFORM_OT_", "VIEW3D_OT_")):
+                return True
+    return False
+
+
+def _depsgraph(scene):
+    """The evaluated depsgraph of a window showing ``scene`` (None when none does)."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in (wm.windows if wm is not None else ()):
+        if window.scene == scene:
+            return scene.view_layers[window.view_layer.name].depsgraph
+    if bpy.context.scene == scene:
+        return bpy.context.evaluated_depsgraph_get()
+    return None
+
+
 def settle_now(scene) -> bool:
     """Trace ``scene``'s moving objects' shadows where they stand; False when nothing ran."""
     sphere_nodes, _, precompute, settings = _modules()
     busy = _job_running("RENDER") or _job_running("OBJECT_BAKE")
     if busy or precompute.solve_running() or not unsettled(scene):
         return False
-    sphere_nodes.sync(scene, bpy.context.evaluated_depsgraph_get(),
-                      result=settings.last_result(scene), settle_shadows=True)
+    depsgraph = _depsgraph(scene)
+    if depsgraph is None:
+        return False
+    sphere_nodes.sync(scene, depsgraph, result=settings.last_result(scene), settle_shadows=True)
     return True
 
 
 def _tick(now=None):
     """Timer: settle the scenes whose objects stood still for STILL seconds."""
     now = time.monotonic() if now is None else now
+    held = dragging()                    # a trace would freeze the drag: wait for its end
     for name, t in list(_pending.items()):
-        if now - t < STILL:
+        if now - t < STILL or held:
             continue
         del _pending[name]
         scene = bpy.data.scenes.get(name)

@@ -133,5 +133,16 @@ def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
     # a second run refits the same volume; Clear removes it with its data
     assert bpy.ops.relight.eevee_light(spacing=0.5, bake=False) == {"FINISHED"}
     assert len([o for o in scene.objects if o.type == "LIGHT_PROBE"]) == 1
+    # Match Lamp Powers changes the powers the intensity is relative to: the driver follows,
+    # and the volume (which the relit emission lit, unchanged) stays at 1
+    before = {n: bpy.data.lights[n].energy for n in LAMPS}
+    assert bpy.ops.relight.match_lamp_powers() == {"FINISHED"}
+    assert max(abs(bpy.data.lights[n].energy / before[n] - 1) for n in LAMPS) > 0.05
+    bpy.context.view_layer.update()
+    assert probe.data.intensity == pytest.approx(1.0, abs=1e-5)
+    shares = dict(probe.data[probe_mod.SHARES_KEY])      # the second precompute's
+    bpy.data.lights["LampA"].energy = 0.0
+    bpy.context.view_layer.update()
+    assert probe.data.intensity == pytest.approx(1.0 - shares["LampA"], rel=1e-5)
     assert bpy.ops.relight.clear() == {"FINISHED"}
     assert probe_mod.find_volume(scene) is None and not bpy.data.lightprobes

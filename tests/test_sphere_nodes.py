@@ -618,6 +618,13 @@ def test_a_drag_settles_when_it_stops():
     settle._pending[scene.name] = 100.0           # the handler's note of the last change
     assert settle._tick(now=100.0 + 0.5 * settle.STILL) == settle.POLL    # still moving
     assert flag() == 0.0
+    held = settle.dragging
+    settle.dragging = lambda: True               # the mouse paused, the grab still runs
+    try:
+        assert settle._tick(now=100.0 + 2 * settle.STILL) == settle.POLL
+    finally:
+        settle.dragging = held
+    assert flag() == 0.0 and settle.unsettled(scene)
     assert settle._tick(now=100.0 + 2 * settle.STILL) is None            # stood still: settle
     bpy.context.view_layer.update()               # (the UI's next redraw evaluates the drivers)
     assert flag() == 1.0 and not settle.unsettled(scene)
@@ -625,3 +632,19 @@ def test_a_drag_settles_when_it_stops():
     assert np.abs(after - before).max() > 0.3     # the shadow moved with it
     assert bpy.data.objects["Floor"].material_slots[0].material.node_tree.nodes[
         "S LampA"].inputs["Scale"].is_linked
+
+    # the settled shadow is found through the map's tags, not its name: renamed (a ".001", a
+    # 63-character cut), the floor still takes it, sampled as the map is
+    mat = bpy.data.objects["Floor"].material_slots[0].material
+    m_node = mat.node_tree.nodes["M LampA"]
+    m_node.image.name = "renamed map"
+    for lamp in ("LampA", "LampB"):
+        mat.node_tree.nodes["M " + lamp].extension = "EXTEND"
+    monkey.location.x -= 0.3
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    bpy.context.view_layer.update()
+    assert flag() == 1.0
+    settled_tex = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"
+                   and n.image is not None and sn.SETTLED_KEY in n.image]
+    assert settled_tex and {n.extension for n in settled_tex} == {"EXTEND"}
+    assert {n.image.name for n in settled_tex} == {"Floor_mat_img.relight.settled.0"}

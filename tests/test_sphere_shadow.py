@@ -357,3 +357,29 @@ def test_silhouette_rule_agrees_with_the_product_for_a_small_lamp():
     a = sphere_visibility(p, [0.3, 0, 3.0], 0.01, centres, radii)
     b = sphere_visibility(p, [0.3, 0, 3.0], 0.01, centres, radii, hull)
     assert np.abs(a - b).max() < 0.02 and (a < 0.5).sum() > 10
+
+
+def test_settled_images_are_dilated_across_uv_seams():
+    """A settled shadow image is filtered bilinearly by the material: the texels around a UV
+    island must carry the island's edge values (as the maps do), not the fill's 1, or a fully
+    shadowed island shows a light rim.  Island: the middle half of a 32^2 image, V = 0.2."""
+    from relight_addon.core.relight.maps import SEAM_PIXELS
+    from relight_addon.core.relight.settled import visibility_images
+    from relight_addon.core.texture.mapping import rasterize_patches
+    a, b, c, d = [0.25, 0.25], [0.75, 0.25], [0.75, 0.75], [0.25, 0.75]
+    tm = rasterize_patches(np.array([[a, b, c, c], [a, c, d, d]], float), [0, 0], [(32, 32)])
+    cov = tm.images[0].coverage
+    V = np.full((tm.n_texels, 2), 0.2)
+    V[:, 1] = 1.0                              # a second lamp the object does not hide
+    (img,) = visibility_images(tm, V)
+    assert img.shape == (32, 32, 2) and img.dtype == np.float32
+    rows, cols = np.nonzero(cov)
+    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    ring = np.zeros_like(cov)
+    ring[r0 - SEAM_PIXELS:r1 + SEAM_PIXELS + 1, c0 - SEAM_PIXELS:c1 + SEAM_PIXELS + 1] = True
+    ring &= ~cov
+    np.testing.assert_allclose(img[cov, 0], 0.2, atol=1e-6)
+    np.testing.assert_allclose(img[ring, 0], 0.2, atol=1e-6)      # dilated, not 1
+    far = ~cov & ~ring
+    assert far.any() and np.all(img[far, 0] == 1.0)
+    assert np.all(img[..., 1] == 1.0)

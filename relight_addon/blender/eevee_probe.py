@@ -27,6 +27,7 @@ SPACING = 0.25              # m between the volume's samples
 MAX_RESOLUTION = 32         # samples per axis
 MARGIN = 0.98               # inside the walls: samples on them see behind them
 BAKED_KEY = "relight_baked_intensity"   # sum_k w_k I_k when the volume was baked
+SHARES_KEY = "relight_lamp_shares"      # {lamp: its share of the relit room's light}
 
 
 def relit_bounds(scene):
@@ -104,12 +105,22 @@ def fit_volume(scene, shares, spacing=SPACING):
     _set(data, "capture_emission", True)
     _set(data, "capture_indirect", True)
     _set(data, "capture_world", False)
+    data[SHARES_KEY] = {n: float(w) for n, w in shares.items()}
     terms, constant = intensity_terms(scene, shares)
-    level = current_level(terms, constant)
-    data[BAKED_KEY] = level
+    data[BAKED_KEY] = current_level(terms, constant)
+    drive_intensity(scene, data)
+    return probe
+
+
+def drive_intensity(scene, data):
+    """(Re)write the volume's intensity driver from its lamp shares, the level it was baked at
+    and each lamp's present power at precompute (``relight_power0``, which Match Lamp Powers
+    changes together with the relit materials' drivers)."""
     if data.animation_data is not None:
         for fc in list(data.animation_data.drivers):
             data.animation_data.drivers.remove(fc)
+    terms, constant = intensity_terms(scene, dict(data.get(SHARES_KEY, {})))
+    level = float(data.get(BAKED_KEY, 0.0))
     if terms and level > 0:
         # one coefficient per lamp (w / (P0 level)), 6 digits: a driver expression holds 255
         # characters, ~16 lamps this way
@@ -117,7 +128,6 @@ def fit_volume(scene, shares, spacing=SPACING):
         expr = "+".join(parts + ([f"{constant / level:.6g}"] if constant > 0 else []))
         write.add_driver(_IntensitySocket(data), expr,
                          [(var, "LIGHT", light, "energy") for var, light, _, _ in terms])
-    return probe
 
 
 class _IntensitySocket:

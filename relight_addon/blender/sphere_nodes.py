@@ -37,10 +37,11 @@ import hashlib
 import bpy
 import numpy as np
 
-from ..core.relight.settled import object_visibility
+from ..core.relight.settled import object_visibility, visibility_images
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
-from .write import MAP_PREFIX, SHADOW_PREFIX, _HalfWriter, _ours, _tag, add_driver, scene_key
+from .write import (MAP_PREFIX, MAP_SOURCE, SHADOW_PREFIX, _HalfWriter, _ours, _tag, add_driver,
+                    scene_key)
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
@@ -404,7 +405,8 @@ def group_spheres(ng):
     return a[:, :3], a[:, 3], hull
 
 
-def _sphere_groups(key):
+def sphere_groups(key):
+    """{object name: its sphere group} of the scene with ``key``."""
     return {ng[OBJECT_KEY]: ng for ng in bpy.data.node_groups
             if OBJECT_KEY in ng and ng.get("relight_scene") == key}
 
@@ -423,7 +425,8 @@ def settled_run(objs) -> str:
                               for o in objs]).encode()).hexdigest()
 
 
-def _settled_group(key):
+def settled_group(key):
+    """The scene's "Relight Settled" group, or None."""
     return next((ng for ng in bpy.data.node_groups
                  if SETTLED_FITS in ng and ng.get("relight_scene") == key), None)
 
@@ -435,7 +438,7 @@ def _settled_images(key):
 def drop_settled(key):
     for im in _settled_images(key):
         bpy.data.images.remove(im)
-    ng = _settled_group(key)
+    ng = settled_group(key)
     if ng is not None:
         bpy.data.node_groups.remove(ng)
 
@@ -481,7 +484,7 @@ def settle(scene, result, objs, fits, depsgraph, key, seed=0):
     sc, tm = result.solution.scene, result.texel_map
     V = object_visibility(sc, tm, np.concatenate(tris), seed=seed)
     names = list(sc.lamp_names)
-    per_image = tm.scatter(V.astype(np.float32), fill=1.0)
+    per_image = visibility_images(tm, V)
     writer = _HalfWriter(key)
     try:
         for i, v in enumerate(per_image):
@@ -521,10 +524,14 @@ def _settled_channel(settled_images, m_node, lname):
     """(image, channel 0-3) holding lamp ``lname``'s settled V for the material whose map node
     for that lamp is ``m_node``, or None."""
     image = m_node.image
-    tail = f".relight.{lname}"
-    if image is None or not image.name.endswith(tail):
+    if image is None:
         return None
-    src = image.name[:-len(tail)]
+    src = image.get(MAP_SOURCE)
+    if src is None:                        # maps written before they were tagged
+        tail = f".relight.{lname}"
+        if not image.name.endswith(tail):
+            return None
+        src = image.name[:-len(tail)]
     for im in settled_images:
         if im.get("relight_settled_source") == src and lname in list(im[SETTLED_KEY]):
             return im, list(im[SETTLED_KEY]).index(lname)
@@ -536,10 +543,10 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
     (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
     (settled group, settled images) or None."""
     tree = mat.node_tree
-    settled_group, settled_images = settled if settled is not None else (None, [])
+    flag_group, settled_images = settled if settled is not None else (None, [])
     signature = repr((sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
-                      None if settled_group is None else
-                      (settled_group.get("relight_settled_run"),
+                      None if flag_group is None else
+                      (flag_group.get("relight_settled_run"),
                        sorted(im.name for im in settled_images), sorted(lamp_group_of))))
     if mat.get(WIRING_KEY) == signature and all(
             getattr(n, "node_tree" if n.bl_idname == "ShaderNodeGroup" else "image") is not None
@@ -590,9 +597,9 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
                 tree.links.new(vis, mul.inputs[0])
                 tree.links.new(g.outputs[0], mul.inputs[1])
                 vis = mul.outputs[0]
-        if settled_group is not None:       # V + settled (V_exact - V)
+        if flag_group is not None:       # V + settled (V_exact - V)
             flag = node("ShaderNodeGroup", "Settled", (x0 + 200, y + 120))
-            flag.node_tree = settled_group
+            flag.node_tree = flag_group
             found = _settled_channel(settled_images, m_node, lname)
             diff = node("ShaderNodeMath", "Settled difference", (x0 + 420, y + 120))
             diff.operation = "SUBTRACT"
@@ -603,6 +610,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
                 tex = node("ShaderNodeTexImage", "Settled V", (x0 + 200, y + 300))
                 tex.image = im
                 tex.interpolation = m_node.interpolation
+                tex.extension = m_node.extension
                 if m_node.inputs["Vector"].is_linked:
                     tree.links.new(m_node.inputs["Vector"].links[0].from_socket,
                                    tex.inputs["Vector"])
@@ -647,7 +655,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    groups = _sphere_groups(key)
+    groups = sphere_groups(key)
     wanted, fitted = [], 0
     for obj in moving_objects(scene):
         n = sphere_count(obj)
@@ -668,22 +676,22 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
         bpy.data.node_groups.remove(stale)
     objs = [bpy.data.objects[g[OBJECT_KEY]] for g in wanted]
     fits = {g[OBJECT_KEY]: g[FIT_KEY] for g in wanted}
-    settled_group, settled_s = _settled_group(key), 0.0
+    flag_group, settled_s = settled_group(key), 0.0
     if not wanted or not settle_shadows:
         drop_settled(key)
-        settled_group = None
-    elif (settled_group is not None and dict(settled_group[SETTLED_FITS]) == fits
-          and settled_group.get("relight_settled_run") == settled_run(objs)):
+        flag_group = None
+    elif (flag_group is not None and dict(flag_group[SETTLED_FITS]) == fits
+          and flag_group.get("relight_settled_run") == settled_run(objs)):
         pass                               # nothing moved or changed since the last trace
     elif result is not None and getattr(result, "texel_map", None) is not None:
         import time
         t0 = time.perf_counter()
-        settled_group = settle(scene, result, objs, fits, depsgraph, key, seed)
+        flag_group = settle(scene, result, objs, fits, depsgraph, key, seed)
         settled_s = time.perf_counter() - t0
-    elif settled_group is not None and dict(settled_group[SETTLED_FITS]) != fits:
+    elif flag_group is not None and dict(flag_group[SETTLED_FITS]) != fits:
         drop_settled(key)                  # meshes changed and no result to trace them again
-        settled_group = None
-    settled = None if settled_group is None else (settled_group, _settled_images(key))
+        flag_group = None
+    settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if _ours(m, key) and m.node_tree is not None]
     wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
@@ -696,5 +704,5 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
             f"(measured: {EEVEE_SPHERE_TESTS} compile, 512 do not) and Cycles renders slow "
             "down with the count: lower the objects' Spheres")
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
-            "settled": settled_group is not None, "settle_seconds": settled_s,
+            "settled": flag_group is not None, "settle_seconds": settled_s,
             "warnings": warnings}

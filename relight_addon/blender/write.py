@@ -60,6 +60,8 @@ HALF_MAX = 65504.0
 T_NODE = "T"
 MAP_PREFIX = "M "          # the node of lamp k's map image: "M <lamp name>"
 SHADOW_PREFIX = "S "       # lamp k's moving-shadow factor: "S <lamp name>" (Scale input)
+MAP_SOURCE = "relight_map_source"   # on a map image: the photo's name (names may be renamed)
+MAP_LAMP = "relight_map_lamp"       # on a map image: its lamp's name
 MAT_SUFFIX = ".relight"
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
@@ -563,9 +565,12 @@ def write_results(context, scene_data, report, solution) -> dict:
                 continue
             src = scene_data.images[i].name
             direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
-            made_images[i] = [writer.write(f"{src}.relight.{lname}", m[j],
-                                           None if direct is None else direct[j])
-                              for j, (lname, *_) in enumerate(lamps)]
+            made_images[i] = []
+            for j, (lname, *_) in enumerate(lamps):
+                img = writer.write(f"{src}.relight.{lname}", m[j],
+                                   None if direct is None else direct[j])
+                img[MAP_SOURCE], img[MAP_LAMP] = src, lname
+                made_images[i].append(img)
             if i in textures:
                 t_images[i] = writer.write(f"{src}.relight.T", textures[i])
     finally:

@@ -17,7 +17,8 @@ from ..geometry.raycast import make_occluder
 from ..lights import AREA, SUN
 from ..scene import bilinear_point
 from ..texture.colour import LUMINANCE
-from ..texture.mapping import CoveredTexels, TexelMap
+from ..texture.mapping import CoveredTexels, TexelMap, dilate_seams
+from .maps import SEAM_PIXELS
 from .texel import TexelLight
 
 RAYS = 32                  # per footprint point and lamp
@@ -116,3 +117,15 @@ def object_visibility(scene, texel_map, triangles, rays=RAYS, samples=SAMPLES,
     sub[lit] = np.clip(o[lit] / u[lit], 0.0, 1.0)
     V[mask] = sub
     return V
+
+
+def visibility_images(texel_map, V, seam_pixels=SEAM_PIXELS) -> list:
+    """Per image of ``texel_map``, (H, W, k) float32 of the per-texel ``V`` (T, k): 1 where no
+    face is, dilated across UV seams as the maps are (bilinear filtering at a seam must not
+    pull the fill's 1 into a shadow)."""
+    out = []
+    for v, im in zip(texel_map.scatter(np.asarray(V, np.float32), fill=1.0), texel_map.images):
+        if im.coverage.any() and float(v.min(initial=1.0)) < 1.0:
+            v, _ = dilate_seams(v, im.coverage, seam_pixels)
+        out.append(v)
+    return out
