@@ -758,7 +758,10 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             rho.append(obj_rho)
             emission.append(obj_em)
             lamp.append(obj_lamp)
-            occluder.append(np.ones(p, bool))
+            # A virtual emissive mesh was not in the photo: it must not darken the room the
+            # photo is explained by (measured: as an occluder it raised the shadow-free texture
+            # near it 4 % and its own light 8 %); it stays a lamp.
+            occluder.append(~((role == "virtual") & (obj_lamp >= 0)))
             group.append(obj_group)
             uvs.append(obj_uv)
             image_idx.append(obj_img)
