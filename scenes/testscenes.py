@@ -170,6 +170,21 @@ def closed_cube(rho=0.5, emission=1.0, n: int = 1) -> SceneData:
     return _assemble(parts, lamp_names=["cube"])
 
 
+def clutter_furnace(rho=0.9, touching=False) -> SceneData:
+    """A closed 1 m room in which every face emits 1 and reflects ``rho``, holding two 2 cm
+    cubes 1 mm apart and two thin 20 x 20 cm panels 1 mm apart (issue 10): the exact radiosity
+    is 1 / (1 - rho) on every face that can be seen.  ``touching``: a 10 cm box standing on the
+    floor too (its bottom face lies on the floor).  The room's 6 faces come first."""
+    parts = [flip(quads_from_boxes([0.5, 0.5, 0.5], [1, 1, 1])),
+             quads_from_boxes([0.40, 0.5, 0.3], [0.02, 0.02, 0.02]),
+             quads_from_boxes([0.421, 0.5, 0.3], [0.02, 0.02, 0.02]),
+             quads_from_boxes([0.6, 0.5, 0.3], [0.2, 0.002, 0.2]),
+             quads_from_boxes([0.6, 0.503, 0.3], [0.2, 0.002, 0.2])]
+    if touching:
+        parts.append(quads_from_boxes([0.3, 0.3, 0.01], [0.1, 0.1, 0.02]))
+    return SceneData(np.concatenate(parts), rho, 1.0, 0, ["all"])
+
+
 def parallel_squares(distance: float = 1.0, blocker: bool = False, blocker_size: float = 0.5,
                      receiver_rho=0.5, emitter_exitance=1.0) -> SceneData:
     """Unit emitter square ``[0,1]^2`` at ``z = distance`` facing DOWN (exitance

@@ -318,3 +318,21 @@ def test_core_never_imports_bpy_or_mathutils():
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", out.stdout
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_first_hit_names_the_nearest_triangle(backend, random_scene):
+    """first_hit: the distance of first_hit_distance and the index of the triangle hit (the
+    numpy brute force is the reference), -1 and inf for rays that miss."""
+    tris, o, e = random_scene
+    m = 3000
+    d = e[:m] - o[:m]
+    t_ref, i_ref = rc.make_occluder(tris, "numpy").first_hit(o[:m], d)
+    t, i = rc.make_occluder(tris, backend).first_hit(o[:m], d)
+    assert 0.2 < (i_ref >= 0).mean() < 0.99 and np.all(np.isinf(t_ref) == (i_ref < 0))
+    same = i == i_ref
+    assert same.mean() >= 0.999                      # float32 backends may split near-ties
+    np.testing.assert_allclose(t[same & (i >= 0)], t_ref[same & (i_ref >= 0)], rtol=1e-4,
+                               atol=1e-5)
+    np.testing.assert_array_equal(rc.make_occluder(tris, backend).first_hit_distance(
+        o[:m], d)[same], t[same])

@@ -66,5 +66,19 @@ class BVHTreeOccluder(Occluder):
             out[a:a + k] = [np.inf if x is None else x for x in t]
         return out
 
+    def _first_hit_prim(self, o, u, tmax):
+        tmax = np.minimum(tmax, 1e30)
+        start = o - self._centre
+        rc = self._tree.ray_cast
+        t, prim = np.full(len(o), np.inf), np.full(len(o), -1, np.int64)
+        k = self._BATCH
+        for a in range(0, len(o), k):
+            for i, (_, _, index, dist) in enumerate(
+                    rc(p, q, s) for p, q, s in zip(start[a:a + k].tolist(), u[a:a + k].tolist(),
+                                                   tmax[a:a + k].tolist())):
+                if index is not None:
+                    t[a + i], prim[a + i] = dist, index
+        return t, prim
+
 
 register_backend("bvhtree", BVHTreeOccluder, _import_bvhtree)

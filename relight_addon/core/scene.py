@@ -267,12 +267,27 @@ class SceneData:
     def area_normal(self):
         return quad_area_normal(self.corners)
 
-    def occluder_triangles(self) -> np.ndarray:
-        """(t, 3, 3) triangles of every occluding patch (degenerate halves are dropped)."""
-        c = self.corners[self.occluder]
+    def occluder_triangles(self, with_patches=False):
+        """(t, 3, 3) triangles of every occluding patch (degenerate halves are dropped); with
+        ``with_patches`` also the patch of each, (t,)."""
+        ids = np.flatnonzero(self.occluder)
+        c = self.corners[ids]
         tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]])
         e = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=-1)
+        if with_patches:
+            return tris[e > 0], np.concatenate([ids, ids])[e > 0]
         return tris[e > 0]
+
+    def make_occluder(self):
+        """A ray caster of the occluding patches (None without any) that knows the patch of
+        each of its triangles (``patch_of_triangle``)."""
+        from .geometry.raycast import make_occluder
+        tris, patches = self.occluder_triangles(with_patches=True)
+        if not len(tris):
+            return None
+        occluder = make_occluder(tris)
+        occluder.patch_of_triangle = patches
+        return occluder
 
     def validate_for_solve(self):
         """Raise SceneError for scenes the solver cannot light."""

@@ -153,6 +153,24 @@ class Occluder:
             out[idx] = np.where(np.isfinite(t), t + tmin, np.inf)
         return out
 
+    def first_hit(self, origins, directions, tmax=np.inf) -> tuple:
+        """(distance (n,), triangle index (n,), -1 and inf for misses) of the first hit along
+        normalised directions from the origins."""
+        o = _as_points(origins, "origins")
+        d = _as_points(directions, "directions")
+        n = len(o)
+        tmax = np.broadcast_to(np.asarray(tmax, np.float64), (n,))
+        t, prim = np.full(n, np.inf), np.full(n, -1, np.int64)
+        if n == 0 or self.n_triangles == 0:
+            return t, prim
+        with np.errstate(invalid="ignore", over="ignore"):
+            norm = np.sqrt(np.einsum("ij,ij->i", d, d))
+            valid = np.isfinite(o).all(1) & np.isfinite(norm) & (norm > 0) & (tmax >= 0)
+        idx = np.flatnonzero(valid)
+        if len(idx):
+            t[idx], prim[idx] = self._first_hit_prim(o[idx], d[idx] / norm[idx, None], tmax[idx])
+        return t, prim
+
     # --- to implement: inputs are finite, directions non-zero -------------------------------
     def _occluded(self, o: np.ndarray, d: np.ndarray, eps: float) -> np.ndarray:
         """Segments o + s d, s in [eps, 1 - eps] -> (n,) bool."""
@@ -160,6 +178,10 @@ class Occluder:
 
     def _first_hit(self, o: np.ndarray, u: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """Unit directions u, distances in [0, tmax] -> (n,) float, inf for misses."""
+        raise NotImplementedError
+
+    def _first_hit_prim(self, o: np.ndarray, u: np.ndarray, tmax: np.ndarray) -> tuple:
+        """As ``_first_hit``, with the triangle hit (-1 for misses)."""
         raise NotImplementedError
 
 
@@ -236,7 +258,10 @@ class EmbreeOccluder(Occluder):
         return out
 
     def _first_hit(self, o, u, tmax):
-        out = np.empty(len(o))
+        return self._first_hit_prim(o, u, tmax)[0]
+
+    def _first_hit_prim(self, o, u, tmax):
+        t, prim = np.empty(len(o)), np.empty(len(o), np.int64)
         c = self._centre
 
         def work(a, b):
@@ -244,10 +269,12 @@ class EmbreeOccluder(Occluder):
             dr = u[a:b].astype(np.float32)
             tf = np.minimum(tmax[a:b], np.finfo(np.float32).max).astype(np.float32)
             res = self._scene.run(org, dr, dists=tf, query="INTERSECT", output=True)
-            out[a:b] = np.where(res["geomID"] >= 0, res["tfar"].astype(np.float64), np.inf)
+            hit = res["geomID"] >= 0
+            t[a:b] = np.where(hit, res["tfar"].astype(np.float64), np.inf)
+            prim[a:b] = np.where(hit, res["primID"], -1)
 
         self._map(work, len(o))
-        return out
+        return t, prim
 
 
 # ------------------------------------------------------------------------------------------
@@ -293,12 +320,19 @@ class NumpyOccluder(Occluder):
         return out
 
     def _first_hit(self, o, u, tmax):
-        out = np.empty(len(o))
+        return self._first_hit_prim(o, u, tmax)[0]
+
+    def _first_hit_prim(self, o, u, tmax):
+        t, prim = np.empty(len(o)), np.empty(len(o), np.int64)
         for a in range(0, len(o), self._rows):
             s, ok = self._mt(o[a:a + self._rows], u[a:a + self._rows])
             ok &= (s >= 0) & (s <= tmax[a:a + self._rows, None])
-            out[a:a + self._rows] = np.where(ok, s, np.inf).min(axis=1)
-        return out
+            s = np.where(ok, s, np.inf)
+            j = s.argmin(axis=1)
+            best = s[np.arange(len(s)), j]
+            t[a:a + self._rows] = best
+            prim[a:a + self._rows] = np.where(np.isfinite(best), j, -1)
+        return t, prim
 
 
 # ------------------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
 from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
+from .conserve import COVERAGE_RAYS, conserve_rows, hemisphere_coverage
 from .hierarchy import Hierarchy
 from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
                     visibility_types)
@@ -102,6 +103,18 @@ class _CountingOccluder:
     def segments_occluded(self, origins, ends):
         self.rays += len(origins)
         return self.occluder.segments_occluded(origins, ends)
+
+    def first_hit(self, origins, directions, tmax=np.inf):
+        self.rays += len(origins)
+        return self.occluder.first_hit(origins, directions, tmax)
+
+    @property
+    def triangles(self):
+        return self.occluder.triangles
+
+    @property
+    def patch_of_triangle(self):
+        return getattr(self.occluder, "patch_of_triangle", None)
 
 
 class _Timer(dict):
@@ -289,9 +302,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
         scale = float(np.linalg.norm(hi - lo)) or 1.0
         if occluder == "auto":
-            from ..geometry.raycast import make_occluder
-            tris = scene.occluder_triangles()
-            occluder = make_occluder(tris) if len(tris) else None
+            occluder = scene.make_occluder()
         if occluder is not None:
             occluder = _CountingOccluder(occluder)
         h = Hierarchy(scene)
@@ -407,6 +418,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     with timer("lights"):
         system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
+    with timer("conserve"):
+        _conserve(h, system, gather, occluder, seed, scale, scene)
+    with timer("lights"):
         light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, occluder,
                                                     q.quadrature, q.rays,
                                                     int(rng.integers(2**31)), scale)
@@ -441,12 +455,25 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     tree, cX, cY, cV = ctx.get("clusters", (None, (), (), ()))
     if len(cX):
         system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
+    _conserve(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
+              solution.scene)
     solution.system = system
     solution.light_occ, solution.light_unocc = lights_on_elements(
         solution.scene, h, system.leaves, ctx.get("occluder"), q.quadrature, q.rays,
         int(rng.integers(2**31)), ctx.get("scale", 1.0))
     solve_basis(solution, rho_leaf, emission_scale)
     return solution
+
+
+def _conserve(h, system, gather, occluder, seed, scale, scene):
+    """No leaf gathers more than the part of its hemisphere that sees sources (conserve.py).
+    Needs a ray caster that knows its triangles' patches (``SceneData.make_occluder``)."""
+    if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
+        return
+    rng = np.random.default_rng([int(seed), 0xC0E5])      # its own stream: the rest is unchanged
+    front, back = hemisphere_coverage(h, system.leaves, occluder, scene, COVERAGE_RAYS, rng,
+                                      scale)
+    conserve_rows(system, gather, front, back, COVERAGE_RAYS, scene.occluder, h.patch)
 
 
 def solve_basis(solution: RadiositySolution, rho_leaf=None, emission_scale=None):

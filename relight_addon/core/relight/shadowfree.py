@@ -154,9 +154,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     timings = {}
     stage = _Stage(progress, timings)
     if occluder == "auto":
-        from ..geometry.raycast import make_occluder
-        tris = scene.occluder_triangles()
-        occluder = make_occluder(tris) if len(tris) else None
+        occluder = scene.make_occluder()
 
     orientation = None
     if opt.orient:

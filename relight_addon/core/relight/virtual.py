@@ -140,7 +140,6 @@ def keep_lamps(result, drop):
 def add_objects(result, scene, progress=None):
     """A copy of ``result`` (the precompute of ``scene`` without its virtual objects, per
     texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``)."""
-    from ..geometry.raycast import make_occluder
     from ..radiosity.precompute import solve_basis, solve_radiosity
     from ..scene import SceneData
     from .maps import FACTOR_MAX
@@ -177,8 +176,7 @@ def add_objects(result, scene, progress=None):
     tm = result.texel_map
     H = []
     for sc in (room, combined):
-        tris = sc.occluder_triangles()
-        occ = make_occluder(tris) if len(tris) else None
+        occ = sc.make_occluder()
         s = solve_radiosity(sc, opt.preset, occluder=occ, seed=opt.seed)
         solve_basis(s, sc.rho[s.system.patch], scale)
         H.append(TexelLight(sc, tm, occ, opt.texel_rays, opt.texel_samples,

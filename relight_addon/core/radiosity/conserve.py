@@ -1,0 +1,111 @@
+"""Leaf rows that cannot create light (issue 10).
+
+A leaf gathers sum_j F_ij V_ij of its hemisphere from the sources it is linked to.  The
+unoccluded F is exact at each quadrature point, but the visibility of a partly hidden source is
+estimated from a few rays per point, and its error is largest where a near surface hides most
+of the view (boxes 1 mm apart, thin panels, clutter): the small visible parts of the hidden
+sources come out at 0, 1/4, 1/2 ... of their whole form factor.  Rows reached 1.4 (2.0 at draft)
+in a closed furnace, where they are exactly 1, and rho x row > 1 has no convergent iteration.
+
+Here each leaf casts cosine-weighted rays over its hemisphere.  Where every ray meets the front
+of a source (a patch that reflects or emits; not a back, a black surface or one touching the
+leaf), the leaf's view is closed and its row must be exactly 1, whatever the number of rays:
+the row is set to 1.  Elsewhere the fraction of such rays is only a binomial estimate, worse
+than the row's own form factors (moving rows towards it one way only biased an open scene by
+6 %), and rows are only bounded by 1.  The entries whose visibility was estimated (partly
+visible links) take the change first; the exact ones (sources seen whole) only what those
+cannot absorb.  Sources that do not block rays (an area light's patch, the back copy of a
+two-sided face) are seen through or behind what the rays meet: they are neither counted nor
+changed, and cluster links (far, approximate) are counted and kept.
+
+Measured: a closed furnace with 2 cm cubes and thin panels 1 mm apart, rho 0.5-0.99, is exact
+to 1e-14 at draft and medium (was up to 3.5x the exact value); the Cornell box is unchanged.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..geometry.raycast import ray_offset
+
+COVERAGE_RAYS = 64      # per leaf
+MAX_GAIN = 4.0          # at most this factor on a leaf's estimated entries
+CONTACT = 1e-5          # of the scene's size: a hit this close is a touching surface
+
+
+def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale):
+    """Per leaf (L,): the fractions of cosine-weighted rays from random points of the leaf that
+    first meet the front of a source of ``scene`` (a patch that reflects or emits), and that
+    meet anything else (a back, a black surface, a surface touching the leaf).  ``occluder``
+    knows the patch of each triangle (``patch_of_triangle``)."""
+    L = len(leaves)
+    front = np.zeros(L)
+    other = np.zeros(L)
+    if L == 0 or occluder is None or rays <= 0:
+        return front, other
+    patch_of = np.asarray(occluder.patch_of_triangle)
+    _, normal = scene.area_normal()                  # the scene's own sides (after orienting)
+    source = (scene.rho.max(axis=1) > 0) | (scene.emission.max(axis=1) > 0)
+    c = h.corners[leaves]
+    n = h.normal[leaves]
+    # a tangent frame per leaf
+    axis = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(n, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    eps = ray_offset(scale)
+    chunk = max(1, (1 << 20) // rays)
+    for a in range(0, L, chunk):
+        b = min(a + chunk, L)
+        u, v, x1, x2 = rng.random((4, b - a, rays, 1))
+        cc = c[a:b, None]
+        P = (cc[..., 0, :] + u * (cc[..., 1, :] - cc[..., 0, :]) + v * (cc[..., 3, :] - cc[..., 0, :])
+             + u * v * (cc[..., 0, :] - cc[..., 1, :] + cc[..., 2, :] - cc[..., 3, :]))
+        r, phi = np.sqrt(x1), 2.0 * np.pi * x2
+        D = (r * np.cos(phi) * t1[a:b, None] + r * np.sin(phi) * t2[a:b, None]
+             + np.sqrt(np.maximum(1.0 - x1, 0.0)) * n[a:b, None])
+        O = P + eps * n[a:b, None]
+        t, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
+        hit = prim >= 0
+        p = patch_of[np.maximum(prim, 0)]
+        faces = hit & (np.einsum("ij,ij->i", normal[p], D.reshape(-1, 3)) < 0) & source[p]
+        # a surface touching the leaf (a box standing on it) is no source of its row either
+        faces &= t >= CONTACT * scale
+        front[a:b] = faces.reshape(b - a, rays).mean(axis=1)
+        other[a:b] = (hit & ~faces).reshape(b - a, rays).mean(axis=1)
+    return front, other
+
+
+def conserve_rows(system, gather, front, other, rays, occluder_patch, element_patch):
+    """Scale ``gather.FV`` (in place) so that every leaf's row meets its hemisphere coverage
+    ``front`` (see the module's docstring); returns the per-leaf factor on the estimated
+    entries.  ``occluder_patch`` (per patch): whether it blocks rays; sources that do not (an
+    area light's patch, the back of a two-sided face) are seen through or from behind the
+    surfaces the coverage counts, so they are neither counted nor changed.  Cluster links
+    (far, approximate) are counted and kept.  ``element_patch``: the patch of each element."""
+    L = system.n_leaves
+    slot = np.searchsorted(system.leaves, gather.leaf)
+    counted = np.asarray(occluder_patch, bool)[element_patch[gather.source]]
+    estimated = counted & (gather.FV > 0) & ((gather.F == 0)
+                                             | (gather.FV < gather.F * (1.0 - 1e-9)))
+    fixed = np.bincount(slot, np.where(counted & ~estimated, gather.FV, 0.0), L)
+    estim = np.bincount(slot, np.where(estimated, gather.FV, 0.0), L)
+    clusters = np.zeros(L)
+    if system.U is not None:
+        blocking = np.asarray(occluder_patch, bool)[system.patch].astype(float)
+        clusters = system.U @ (system.W @ blocking)
+    rows = fixed + estim + clusters
+    # Every ray met a source's front: the target is exact (a closed view), the row must be 1.
+    # Elsewhere the coverage is only a binomial estimate, worse than the row's own form factors
+    # (moving rows that are off it one way only biased an open scene by 6 %): only the bound.
+    closed = (front == 1.0) & (other == 0.0)
+    want = np.where(closed, 1.0, np.minimum(rows, 1.0)) - clusters
+    alpha = np.where(estim > 0, np.clip((want - fixed) / np.where(estim > 0, estim, 1.0),
+                                        0.0, MAX_GAIN), 1.0)
+    rest = want - fixed - alpha * estim
+    exact_moves = closed | (rows > 1.0)
+    beta = np.where(exact_moves & (fixed > 0),
+                    np.clip(1.0 + rest / np.where(fixed > 0, fixed, 1.0), 0.0, MAX_GAIN), 1.0)
+    gather.FV = gather.FV * np.where(estimated, alpha[slot], np.where(counted, beta[slot], 1.0))
+    system.M = sp.csr_matrix((gather.FV, (slot, gather.source)), shape=system.M.shape)
+    return alpha
