@@ -309,3 +309,27 @@ def test_no_leaf_gathers_more_than_its_hemisphere_in_open_clutter():
     print(f"open clutter: rows max {rows.max():.6f}, solver residual {sol.info.residual:.1e}")
     assert rows.max() <= 1.0 + 1e-9
     assert sol.info.converged and np.all(np.isfinite(sol.radiosity()))
+
+
+def test_a_solve_without_convergent_physics_stops_at_its_bound_and_says_so():
+    """rho 1 in a closed room: (I - rho K) is singular and uniform emission has no solution.
+    GMRES stops after at most GMRES_RESTARTS x 60 iterations (it used to run 200 x 60) and
+    reports it; the precompute's diagnostics turn that into a sentence."""
+    import time
+    from types import SimpleNamespace
+
+    from relight_addon.core.radiosity.solver import GMRES_RESTARTS
+    from relight_addon.core.relight.diagnose import diagnose
+    sol = solve_radiosity(closed_cube(rho=0.5, emission=1.0, n=2), "draft", occluder=None)
+    system = sol.system
+    system.rho = np.ones_like(system.rho)
+    t0 = time.perf_counter()
+    B, info = system.solve(np.ones((system.n_leaves, 3)), "gmres", tol=1e-10)
+    print(f"{info.iterations} iterations, residual {info.residual:.1e}, "
+          f"{time.perf_counter() - t0:.2f} s")
+    assert not info.converged and info.iterations <= 60 * GMRES_RESTARTS
+    sol.info = info
+    words = diagnose(SimpleNamespace(solution=sol, maps={}, lamps=SimpleNamespace(
+        photo_ratio=np.full(1, np.nan), uncertainty=np.full(1, np.nan))),
+        np.ones(sol.scene.n_patches, bool))
+    assert any("without converging" in w for w in words), words

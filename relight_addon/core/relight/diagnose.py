@@ -11,7 +11,8 @@ trusted, instead of a bare misfit number:
   should check it (the message says whether the photo's estimate was used);
 * a lamp whose map is zero on every photographed texel (inside or behind geometry);
 * a lamp closer to a surface than TOUCHING (metres) or than its own radius: the light right
-  next to it is not resolved.
+  next to it is not resolved;
+* a light solve that stopped at its iteration bound without converging.
 """
 from __future__ import annotations
 
@@ -128,6 +129,11 @@ def diagnose(result, use_patch, group_names=str) -> list:
         if peak <= 1e-9:
             out.append(f"Lamp '{names[k]}' lights none of the photographed surfaces (is it "
                        "inside or behind something?): switching it on will change nothing")
+    info = getattr(sol, "info", None)
+    if info is not None and not info.converged:
+        out.append(f"The light solve stopped without converging ({info.iterations} iterations, "
+                   f"residual {info.residual:.1e}): the interreflections may be wrong (look for "
+                   "surfaces that overlap or reflect almost all light)")
     for k in range(len(names)):
         gap = lamp_clearance(scene, k)
         if gap < TOUCHING:
