@@ -21,7 +21,7 @@ from ..geometry.formfactor import point_kernel, point_to_polygon
 from ..geometry.raycast import ray_offset
 from ..scene import SceneData, bilinear_point, quad_area_normal
 
-_CHUNK_RAYS = 1 << 19     # rays in flight per call (two calls may run at once)
+_CHUNK_RAYS = 1 << 17     # rays in flight per call (two may run at once): ~60 MB each
 FIRST_RAYS = 16
 TABLE = 256            # area-uniform sample points kept per lamp patch
 
