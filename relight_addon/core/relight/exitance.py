@@ -149,7 +149,11 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
                 use[np.flatnonzero(on)[pinned]] = True
             if use.any():
                 applied = use
-                scale[use] = scale[use] * ratio[use]
+                # relative to the lamps that keep the user's ratios: the photo's ratios have
+                # their geometric mean 1 over every lamp, the uncorrected ones included
+                keep = on & ~use
+                base = np.exp(np.mean(np.log(ratio[keep]))) if keep.any() else 1.0
+                scale[use] = scale[use] * ratio[use] / base
                 scale = rounds(scale, rho_mean)
     return LampEstimate(scale, ratio, sigma, applied, eq_k, nnls_k, opt.exitance, rho_mean)
 
