@@ -139,7 +139,9 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
         fit = edge_fit(sol, tm, photo, scale, texel_light, on, folds=JACKKNIFE_FOLDS,
                        indirect=False)
         if on.sum() >= 2 and tm.n_texels:
-            sig = np.hypot(fit.sigma_t, MODEL_SIGMA / np.minimum(on.sum() * fit.share, 1.0))
+            with np.errstate(divide="ignore"):     # inf for a lamp that lights nothing
+                bias = MODEL_SIGMA / np.minimum(on.sum() * fit.share, 1.0)
+            sig = np.hypot(fit.sigma_t, bias)
             ratio[on], sigma[on] = fit.t, sig
             if opt.exitance == "photo":
                 use = on.copy()
