@@ -7,7 +7,8 @@ lamp types (area RECTANGLE / SQUARE / DISK / ELLIPSE, POINT with a radius, SPOT,
 window hole, emissive meshes), ceiling and wall-mounted lamps 0.2-1.5 m from the nearest wall,
 albedo from dark (0.1) to white (0.85), plain and patterned textures (checker, stripes, noise,
 wood), posters (separate quads or painted into a wall texture), furniture (tables, shelves,
-boxes, cabinets) and texel densities 128-256 per wall (24-32 in the small test rooms).
+boxes, cabinets) and texel densities 128-512 per wall (24-32 in the small test rooms; room 19
+has one 512-texel wall, its other surfaces at 128: ``_Room.shell(..., texels={surface: n})``).
 
 Two halves, like the office:
 
@@ -66,8 +67,9 @@ from scenes.office import _atlas_uvs, _box_faces, _quad, _smooth_noise
 GENERATOR_VERSION = "family-v1"
 SEEDED = list(range(16))            # generated rooms 0-15
 BUG_A, BUG_B, OTHER_PROGRAM = 16, 17, 18
+DENSE_WALL = 19                     # one wall at 512 texels, the rest at 128
 TEST_ROOMS = [20, 21, 22]           # small rooms (32 texels) for pytest, bakes in tests/data
-FAMILY = SEEDED + [BUG_A, BUG_B, OTHER_PROGRAM] + TEST_ROOMS
+FAMILY = SEEDED + [BUG_A, BUG_B, OTHER_PROGRAM, DENSE_WALL] + TEST_ROOMS
 HELD_OUT = [12, 13, 14, 15]         # never used for tuning
 LETTERS = "ABCDEFGH"
 
@@ -160,7 +162,7 @@ class RoomSpec:
     index: int
     description: str
     size: tuple                    # (W, D, H) metres
-    texel: int                     # texture size of the walls
+    texel: int                     # texture size of the walls (of every shell surface not in texels)
     surfaces: list
     lamps: list
     camera_location: tuple
@@ -168,6 +170,7 @@ class RoomSpec:
     held_out: bool = False
     window: dict | None = None     # {"wall": name, "uv": (u0, u1, v0, v1)} hole in that wall
     pilot: bool = False            # a low-resolution copy (sample-count pilot)
+    texels: dict = field(default_factory=dict)  # {shell surface: size} where it is not ``texel``
 
     @property
     def name(self) -> str:
@@ -353,18 +356,29 @@ class _Room:
         self.index, self.size, self.texel, self.rng = index, tuple(map(float, size)), int(texel), rng
         self.level = level
         self.furn_texel = int(furn_texel or max(24, texel // 2))
+        self.texels = {}               # per-surface texture sizes that differ from ``texel``
         self.surfaces, self.lamps, self.footprints = [], [], []
         self.window = None
         self.posters = 0
 
+    def texel_of(self, name):
+        """Texture size (square) of the shell surface ``name``: its override or ``texel``."""
+        return int(self.texels.get(name, self.texel))
+
     # shell
-    def shell(self, patterns, hole=None, poster=None):
+    def shell(self, patterns, hole=None, poster=None, texels=None):
         """patterns: {name: (kind, level, periods)}; hole: (wall, (u0, u1, v0, v1));
-        poster: (wall, (u0, u1, v0, v1)) painted into that wall's texture."""
+        poster: (wall, (u0, u1, v0, v1)) painted into that wall's texture; texels: {name: n}
+        per-surface texture sizes (n x n) instead of the room's ``texel`` (e.g. one dense wall)."""
         W, D, H = self.size
+        names = {nm for nm, *_ in _shell(W, D, H)}
+        unknown = set(texels or {}) - names
+        if unknown:
+            raise KeyError(f"no shell surface {sorted(unknown)}; surfaces: {sorted(names)}")
+        self.texels.update({k: int(v) for k, v in (texels or {}).items() if int(v) != self.texel})
         for name, kind, o, du, dv in _shell(W, D, H):
             pk, lvl, per = patterns.get(name, ("plain", self.level, 4))
-            h = self.texel
+            h = self.texel_of(name)
             img = albedo_pattern(pk, self.rng, h, h, lvl, per)
             wall_hole = hole[1] if hole is not None and hole[0] == name else None
             quads, uvs = _wall_quads(o, du, dv, wall_hole)
@@ -524,7 +538,8 @@ class _Room:
         W, D, H = self.size
         cam = camera or ((W - 0.3, 0.3, min(1.7, H - 0.5)), (0.35 * W, 0.7 * D, 0.35 * H))
         return RoomSpec(self.index, description, self.size, self.texel, self.surfaces, self.lamps,
-                        tuple(map(float, cam[0])), tuple(map(float, cam[1])), held_out, self.window)
+                        tuple(map(float, cam[0])), tuple(map(float, cam[1])), held_out, self.window,
+                        texels=dict(self.texels))
 
 
 # -- the rooms ------------------------------------------------------------------------------------
@@ -805,6 +820,28 @@ def _other_program(texel=None):
                   camera=((0.3, 0.3, 1.6), (4.0, 3.0, 0.8)))
 
 
+def _dense_wall(texel=None):
+    """Room 19: one wall at 4x the texel density (512 texels on the striped north wall with a
+    poster painted into it, the other surfaces at 128): a table and a shelf against that wall
+    shadow it, two ceiling lamps 1:2 (warm rectangle, neutral disk).  A pilot (``texel``) keeps
+    the 4:1 ratio."""
+    rng = np.random.default_rng(2019)
+    T = texel or 128
+    r = _Room(DENSE_WALL, (4.5, 4.0, 2.7), T, rng, "mid")
+    pats = _room_patterns(rng, "mid", ["wood", "plain", "noise", "plain"])
+    pats["Wall North"] = ("stripes", "mid", 8)
+    r.shell(pats, poster=("Wall North", (0.14, 0.36, 0.42, 0.8)), texels={"Wall North": 4 * T})
+    # a table 0.2 m from the north wall (its slab and legs shadow the wall) and a shelf against it
+    r.furniture("Table", "table", (0.6, 3.1, 0.0), (2.2, 3.8, 0.75), "wood")
+    r.furniture("Shelf", "shelf", (2.9, 3.63, 0.0), (3.9, 3.98, 1.8), "plain", "light")
+    w = _weights(rng, 2, 2.0)
+    r.ceiling_area("RECTANGLE", (1.4, 2.6), 1.0, 0.5, w[0], "warm white")
+    r.ceiling_area("DISK", (3.2, 1.8), 0.6, 0.6, w[1], "neutral white")
+    return r.spec("512 texels on one wall: striped north wall with a poster, table and shelf "
+                  "shadows on it, warm rectangle and neutral disk 1:2",
+                  camera=((4.2, 0.3, 1.6), (2.0, 4.0, 0.9)))
+
+
 def _test_room(index, texel=None):
     n = texel or 32
     if index == 20:
@@ -838,8 +875,8 @@ def _test_room(index, texel=None):
 
 
 def room_spec(index: int, texel: int | None = None) -> RoomSpec:
-    """The room of ``index`` (see FAMILY); ``texel`` overrides the wall texture size (furniture
-    and posters scale with it) for low-resolution pilots."""
+    """The room of ``index`` (see FAMILY); ``texel`` overrides the wall texture size (furniture,
+    posters and per-wall texel overrides scale with it) for low-resolution pilots."""
     index = int(index)
     if index in SEEDED:
         spec = _seeded(index, texel)
@@ -849,6 +886,8 @@ def room_spec(index: int, texel: int | None = None) -> RoomSpec:
         spec = _bug_b(texel)
     elif index == OTHER_PROGRAM:
         spec = _other_program(texel)
+    elif index == DENSE_WALL:
+        spec = _dense_wall(texel)
     elif index in TEST_ROOMS:
         spec = _test_room(index, texel)
     else:

@@ -84,6 +84,13 @@ def test_family_covers_the_issue(specs):
     furn = {s_.name.split()[0] for s in specs.values() for s_ in s.surfaces if s_.kind == "furniture"}
     assert {"Table", "Shelf", "Box", "Cabinet"} <= furn
     assert {s.texel for s in seeded} == {128, 256}
+    walls = {s_.albedo.shape[0] for s in specs.values() if s.index not in fam.TEST_ROOMS
+             for s_ in s.surfaces if s_.kind == "wall"}
+    assert min(walls) == 128 and max(walls) == 512                      # 128-512 per wall
+    d = specs[fam.DENSE_WALL]                   # one 512-texel wall, the rest of the shell at 128
+    assert d.texels == {"Wall North": 512} and not d.held_out
+    assert sorted(s_.albedo.shape[0] for s_ in d.surfaces if s_.kind != "furniture") == [128] * 5 + [512]
+    assert fam.room_spec(fam.DENSE_WALL, texel=24).surface("Wall North").albedo.shape[:2] == (96, 96)
     assert all(specs[i].texel <= 32 for i in fam.TEST_ROOMS)
     # the sun shines through a window hole into an otherwise closed room
     for s in specs.values():
