@@ -76,15 +76,15 @@ class LampEstimate:
 
 # The photo's ratio replaces the user's (mode "user") only when it is pinned down: its
 # uncertainty -- the jackknife's and a bias term (the preset's exitance_bias, 0.05 at medium)
-# -- below PINNED_SIGMA, and its distance from 1 above PINNED_Z of it.  Set on the family's tuning rooms 0, 3, 16, 17, 18
-# (medium): with exact powers the photo's ratios erred by 0-6 % where the jackknife was below
-# 0.12 (room 17: 21 %, jackknife 0.22), so no exact power was overridden; with powers 30 % off
-# the estimate (6-11 % off) replaced them in every room but 17.  The bias term grows for a
-# lamp with less than an equal share of the direct light (exitance_bias / (k share)): what the
-# model gets wrong about the other lamps' light weighs on its ratio in proportion to their
-# light over its own, and no jackknife over surfaces sees it (every surface shares it).  The
-# weakest lamps of the family's 4-lamp rooms (5 % of the light among 1:4 lamps) were pinned
-# at +15 to +43 % with exact powers.
+# -- below PINNED_SIGMA, and its distance from 1 above PINNED_Z of it.  Set on the family's
+# tuning rooms 0, 3, 16, 17, 18 (medium): with exact powers the photo's ratios erred by 0-6 %
+# where the jackknife was below 0.12 (room 17: 21 %, jackknife 0.22), so no exact power was
+# overridden; with powers 30 % off the estimate (6-11 % off) replaced them in every room but
+# 17.  The bias term grows for a lamp with less than an equal share of the direct light
+# (exitance_bias / (k share)): what the model gets wrong about the other lamps' light weighs
+# on its ratio in proportion to their light over its own, and no jackknife over surfaces sees
+# it (every surface shares it).  The weakest lamps of the family's 4-lamp rooms (5 % of the
+# light among 1:4 lamps) were pinned at +15 to +43 % with exact powers.
 PINNED_SIGMA = 0.15
 PINNED_Z = 2.0
 JACKKNIFE_FOLDS = 8
@@ -139,8 +139,9 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
         fit = edge_fit(sol, tm, photo, scale, texel_light, on, folds=JACKKNIFE_FOLDS,
                        indirect=False)
         if on.sum() >= 2 and tm.n_texels:
+            floor = get_preset(opt.preset).exitance_bias
             with np.errstate(divide="ignore"):     # inf for a lamp that lights nothing
-                bias = get_preset(opt.preset).exitance_bias / np.minimum(on.sum() * fit.share, 1.0)
+                bias = floor / np.minimum(on.sum() * fit.share, 1.0)
             sig = np.hypot(fit.sigma_t, bias)
             ratio[on], sigma[on] = fit.t, sig
             if opt.exitance == "photo":
