@@ -106,14 +106,14 @@ def test_a_weak_lamp_among_four_keeps_the_users_power():
     on the shadow depth, the contact shadows around the cabinet pulled rho^ to 0.29 (true
     0.47), and the shadow-edge fit then replaced the weakest lamp's power (5 % of the light)
     by 1.43 times it."""
+    from relight_addon.core.scene import quad_area_normal
     from relight_addon.core.texture.colour import luminance
     register_repo_addon()
     room = fe.photographed_room(5, "exact")
     res = shadow_free(room.data, ShadowFreeOptions(preset="medium"))
     area = albedo = 0.0
     for s in room.spec.surfaces:
-        q = s.quads
-        a = 0.5 * np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1]), axis=1).sum()
+        a = float(quad_area_normal(s.quads)[0].sum())
         area += a
         albedo += a * float(luminance(s.albedo[fam.coverage(s)]).mean())
     assert res.lamps.rho_mean == pytest.approx(albedo / area, rel=0.15)

@@ -315,7 +315,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # The indirect weight g is voted on by pieces of surface (a patch, or a cell of it: large
 # patches are cut into up to VOTE_CELLS^2 cells of their own parameters), at the lamp ratios
 # given: each piece whose total variation has a minimum in g votes for it, with the weight of
-# how sharply it pins g (the second difference over +-VOTE_STEP in log g) capped at the median
+# how sharply it pins g (the second difference over +-VOTE_STEP grid steps) capped at the median
 # piece's, and the weighted median wins.  A pooled fit lets the steepest region decide: in
 # room 5 of the family the wall around a cabinet (contact shadows, whose indirect darkening
 # the element-level indirect light does not resolve) wanted g = 0.2-0.4 where most pieces
@@ -323,7 +323,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # weakest lamp by +43 %).
 VOTE_CELLS = 4
 VOTE_CELL_TEXELS = 32
-VOTE_STEP = 0.25
+VOTE_STEP = 2                                 # grid steps (0.25 in log g)
 VOTE_MIN_PAIRS = 200
 VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
 VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
@@ -347,15 +347,17 @@ def _vote_g(D, I, dlog_t, tm, a, b, fallback=1.0):
     counts = np.bincount(pc, minlength=int(piece.max(initial=-1)) + 1)
     da, db, ia, ib = D[a[sel]], D[b[sel]], I[a[sel]], I[b[sel]]
     dl = dlog_t[sel]
-    grid = np.r_[VOTE_GRID, VOTE_GRID + VOTE_STEP, VOTE_GRID - VOTE_STEP]
+    # the grid, VOTE_STEP points wider on each side for the second difference at its ends
+    m = len(VOTE_GRID)
+    h = VOTE_GRID[1] - VOTE_GRID[0]
+    grid = VOTE_GRID[0] + h * np.arange(-VOTE_STEP, m + VOTE_STEP)
     f = np.empty((len(grid), len(counts)))
     for j, lg in enumerate(grid):
         w = np.exp(lg)
         r = np.abs(dl - np.log(np.maximum(da + w * ia, 1e-300))
                    + np.log(np.maximum(db + w * ib, 1e-300)))
         f[j] = np.bincount(pc, weights=r, minlength=len(counts))
-    m = len(VOTE_GRID)
-    centre, up, down = f[:m], f[m:2 * m], f[2 * m:]
+    centre, up, down = f[VOTE_STEP:VOTE_STEP + m], f[2 * VOTE_STEP:], f[:m]
     best = np.argmin(centre, axis=0)
     cols = np.arange(len(counts))
     info = np.maximum(up[best, cols] + down[best, cols] - 2.0 * centre[best, cols], 0.0)
