@@ -36,10 +36,11 @@ def _modules():
     return read, write, precompute
 
 
-def run_precompute(data, preset, correction="TEXEL", progress=None, reuse=None):
+def run_precompute(data, preset, correction="TEXEL", progress=None, reuse=None, proxy_faces=0):
     """The bpy-free precompute: shadow-free textures and per-lamp display maps."""
     from ..relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
-    options = ShadowFreeOptions(mode=correction.lower(), preset=preset)
+    options = ShadowFreeOptions(mode=correction.lower(), preset=preset,
+                                proxy_faces=int(proxy_faces))
     return shadow_free(data, options, progress=progress, reuse=reuse)
 
 
@@ -55,9 +56,15 @@ def reusable_solution(scene, preset, correction):
     """The last run's radiosity solution when Update may keep its mesh and links."""
     result = last_result(scene)
     if result is None or correction == "ELEMENT" or result.options.preset != preset \
-            or result.options.mode == "element":
+            or result.options.mode == "element" \
+            or result.options.proxy_faces != proxy_faces_of(scene):
         return None
     return result.solution
+
+
+def proxy_faces_of(scene):
+    """The scene's setting for a dense mesh's radiosity proxy (0: the preset's)."""
+    return int(getattr(getattr(scene, "relight", None), "proxy_faces", 0))
 
 
 def virtual_lights(scene):
@@ -100,19 +107,29 @@ def memory_error(context, data, preset):
     the add-on preference ``memory_limit_gb`` (checked before solving; nothing is changed)."""
     from .. import preferences
     from ..relight_addon.core.radiosity.memory import estimate_precompute_memory
-    estimate, limit = estimate_precompute_memory(data, preset), preferences.memory_limit_bytes(context)
+    from ..relight_addon.core.radiosity.presets import PROXY_FACTOR, get_preset
+    faces = proxy_faces_of(context.scene)
+    estimate = estimate_precompute_memory(data, preset, proxy_faces=faces)
+    limit = preferences.memory_limit_bytes(context)
     if estimate <= limit:
         return None
+    proxy = faces or get_preset(preset).proxy_faces
+    if data.n_patches > PROXY_FACTOR * proxy:
+        hint = (f"lower Proxy Faces (now {proxy}: the {data.n_patches} faces are solved on a "
+                f"decimated proxy of that many), use smaller photos")
+    else:
+        hint = "choose a lower preset, use fewer faces or smaller photos"
     return (f"Relight precompute ({preset}) needs about {estimate / 2**30:.2f} GB, more than the "
-            f"{limit / 2**30:.2f} GB memory limit (add-on preferences): choose a lower preset, "
-            f"fewer faces, or raise the limit")
+            f"{limit / 2**30:.2f} GB memory limit (add-on preferences): {hint}, or raise the "
+            f"limit")
 
 
 class SolveJob:
     """The radiosity solve in a worker thread. ``state``: running / done / cancelled / failed."""
 
-    def __init__(self, scene_data, preset, correction="TEXEL", reuse=None):
+    def __init__(self, scene_data, preset, correction="TEXEL", reuse=None, proxy_faces=0):
         self.scene_data = scene_data
+        self.proxy_faces = proxy_faces
         self.preset = preset
         self.correction = correction
         self.reuse = reuse
@@ -146,7 +163,8 @@ class SolveJob:
         _, _, precompute = _modules()
         try:
             self.result = run_precompute(self.scene_data, self.preset, self.correction,
-                                         progress=self._progress, reuse=self.reuse)
+                                         progress=self._progress, reuse=self.reuse,
+                                         proxy_faces=self.proxy_faces)
             self.state = "cancelled" if self._cancel.is_set() else "done"
         except precompute.Cancelled:
             self.state = "cancelled"
@@ -193,7 +211,8 @@ class _PrecomputeRunner(RelightOperator):
 
     def _solve_now(self, context, data, read_report, preset, correction, reuse=None):
         try:
-            solution = run_precompute(data, preset, correction, reuse=reuse)
+            solution = run_precompute(data, preset, correction, reuse=reuse,
+                                      proxy_faces=proxy_faces_of(context.scene))
         except Exception as ex:
             self.report({'ERROR'}, f"Relight precompute failed: {user_message(ex)}")
             return {'CANCELLED'}
@@ -203,7 +222,8 @@ class _PrecomputeRunner(RelightOperator):
         if bpy.app.background or context.window is None:
             return self._solve_now(context, data, read_report, preset, correction, reuse)
         self._data, self._read_report, self._run_correction = data, read_report, correction
-        self._job = _ACTIVE["job"] = SolveJob(data, preset, correction, reuse).start()
+        self._job = _ACTIVE["job"] = SolveJob(data, preset, correction, reuse,
+                                              proxy_faces_of(context.scene)).start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 100)

@@ -13,7 +13,7 @@ import uuid
 
 import bpy
 from bpy.app.handlers import persistent
-from bpy.props import BoolProperty, EnumProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 STATUS = "relight_status"
 ROLE_PROPERTY = "relight_role"
@@ -126,6 +126,11 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     correction: EnumProperty(name="Shadow Removal", items=CORRECTION_ITEMS, default="TEXEL",
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
+    proxy_faces: IntProperty(name="Proxy Faces", default=0, min=0, soft_max=20000,
+                             description="A mesh of more than 4x this many faces (a scan) is "
+                                         "solved on a decimated proxy of about this many "
+                                         "triangles; the direct light and the textures stay "
+                                         "on the full mesh. 0: the quality preset's")
     settle: BoolProperty(name="Settle Moving Shadows", default=True,
                          description="On Update, ray-trace the moving objects' real shadows "
                                      "where they stand; the materials use them until an "
@@ -172,6 +177,10 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
         "photo_sigma": [finite(x, -1.0) for x in est.uncertainty],
         "photo_used": [bool(x) for x in est.applied],
         "rho_mean": finite(est.rho_mean, -1.0),
+        # a dense mesh solved on a decimated proxy: its faces and how far the mesh is from it
+        "proxy_faces": int(stats.get("proxy_faces", 0)),
+        "input_faces": int(stats.get("input_faces", 0)),
+        "proxy_deviation": finite(float(stats.get("proxy_deviation", 0.0)), 0.0),
         "warnings": [str(w) for w in warnings],
         "fingerprint": fingerprint, "geometry": geometry,
         # the scene without its virtual lamps (what the real lamps' maps depend on), and the

@@ -33,6 +33,9 @@ def status_lines(scene):
     lines = [(f"{st['elements']:,} elements, {st['links']:,} links", 'MESH_GRID'),
              (f"{st['seconds']:.1f} s ({st['preset']}, shadow removal {st['correction'].lower()})",
               'TIME')]
+    if st.get("proxy_faces", 0):
+        lines.append((f"{st['input_faces']:,} faces solved on a proxy of {st['proxy_faces']:,} "
+                      f"(mean distance {1000 * st['proxy_deviation']:.1f} mm)", 'MOD_DECIM'))
     if math.isfinite(st.get("misfit", float("nan"))):
         lines.append((f"Model vs photo: {100 * st['misfit']:.1f} % RMS", 'INFO'))
     if st.get("rho_mean", -1) > 0:
@@ -102,6 +105,7 @@ class RELIGHT_PT_main(bpy.types.Panel):
             col = layout.column(align=True)
             col.prop(settings, "preset")
             col.prop(settings, "correction")
+            col.prop(settings, "proxy_faces")
             row = layout.row(align=True)
             op = row.operator("relight.precompute", text="Precompute", icon='LIGHT_AREA')
             op.preset = settings.preset

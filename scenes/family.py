@@ -1209,12 +1209,19 @@ def _mesh_object(bpy, name, quads, uvs=None, flip=None):
         q[flip] = q[flip][:, ::-1]
         if uv is not None:
             uv[flip] = uv[flip][:, ::-1]
+    # Degenerate quads (a, b, c, c) are triangles (scenes.scan): made as three-corner faces.
+    k = 3 if nq and np.array_equal(q[:, 2], q[:, 3]) else 4
+    q = q[:, :k]
     me = bpy.data.meshes.new(name)
-    me.from_pydata([tuple(v) for v in q.reshape(-1, 3)], [],
-                   [tuple(f) for f in np.arange(nq * 4).reshape(nq, 4)])
+    me.vertices.add(nq * k)
+    me.vertices.foreach_set("co", q.reshape(-1).astype(np.float32))
+    me.loops.add(nq * k)
+    me.loops.foreach_set("vertex_index", np.arange(nq * k, dtype=np.int32))
+    me.polygons.add(nq)
+    me.polygons.foreach_set("loop_start", np.arange(0, nq * k, k, dtype=np.int32))
     if uv is not None:
         layer = me.uv_layers.new(name="UVMap")
-        layer.data.foreach_set("uv", uv.reshape(-1, 2).astype(np.float32).ravel())
+        layer.data.foreach_set("uv", uv[:, :k].reshape(-1, 2).astype(np.float32).ravel())
     me.update()
     obj = bpy.data.objects.new(name, me)
     bpy.context.scene.collection.objects.link(obj)

@@ -69,14 +69,18 @@ def user_powers(spec, mode):
     return out
 
 
-def photographed_room(index, powers="exact") -> Room:
+def photographed_room(index, powers="exact", scan=None) -> Room:
     """Build room ``index`` in a fresh bpy scene with the photo bakes as its textures and read
-    it (bpy)."""
+    it (bpy).  ``scan``: {"triangles": n, "noise": metres, "seed": s} re-meshes every surface
+    as a scanned room (scenes.scan); the bakes stay valid texel for texel."""
     import bpy  # noqa: PLC0415
 
     from relight_addon.blender.read import read_scene  # noqa: PLC0415
     spec = fam.room_spec(index)
     bakes = fam.load_bakes(index)
+    if scan is not None:
+        from scenes.scan import scan_spec  # noqa: PLC0415
+        spec = scan_spec(spec, **scan)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     info = fam.build_room(spec, "file")
     for obj, img_name in info["albedo_images"].items():

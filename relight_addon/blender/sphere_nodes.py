@@ -481,7 +481,8 @@ def settle(scene, result, objs, fits, depsgraph, key, seed=0):
         t = object_triangles(obj, depsgraph)
         M = np.array(obj.matrix_world)
         tris.append(t @ M[:3, :3].T + M[:3, 3])
-    sc, tm = result.solution.scene, result.texel_map
+    sc = result.scene if result.scene is not None else result.solution.scene
+    tm = result.texel_map
     V = object_visibility(sc, tm, np.concatenate(tris), seed=seed)
     names = list(sc.lamp_names)
     per_image = visibility_images(tm, V)

@@ -184,7 +184,8 @@ def cluster_operator(tree: ClusterTree, h: Hierarchy, leaves: np.ndarray, X, Y, 
     if k == 0:
         return sp.csr_matrix((L, 0)), sp.csr_matrix((0, L))
     # Leaves grouped by their patch's position in the tree order: each node's leaves are a range.
-    rank = np.empty(int(tree.order.max()) + 1, np.int64)
+    # (patches outside the tree, e.g. lamps, rank -1: under no node)
+    rank = np.full(max(int(tree.order.max()), int(h.patch[leaves].max())) + 1, -1, np.int64)
     rank[tree.order] = np.arange(len(tree.order))
     leaf_rank = rank[h.patch[leaves]]
     by_rank = np.argsort(leaf_rank, kind="stable")

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from .presets import get_preset
+from .presets import PROXY_FACTOR, get_preset
 
 BASE_BYTES = 60 * 2**20
 LINK_BYTES = 2 * 1024
@@ -43,6 +43,7 @@ LINKS_PER_LEAF_LOG = 6.0
 TEXEL_BYTES = 160
 TEXEL_LAMP_BYTES = 140
 RAY_CHUNK_BYTES = 550 * 2**20    # two ray-casting threads, ~250 MB of rays each
+FACE_BYTES = 4 * 1024            # per input face of a mesh solved on a proxy (measured below)
 
 
 def estimate_leaves(areas, min_area_fraction) -> float:
@@ -62,11 +63,15 @@ def estimate_links(leaves) -> float:
     return min(LINKS_PER_LEAF_LOG * leaves * math.log2(leaves + 2.0), leaves * (leaves - 1.0) / 2.0)
 
 
-def estimate_precompute_memory(scene_data, preset) -> int:
-    """Estimated peak bytes of ``solve_radiosity(scene_data, preset)``.
+def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) -> int:
+    """Estimated peak bytes of the precompute of ``scene_data`` at ``preset``: the solve, and
+    the shadow-free textures' per-texel work.
 
     ``scene_data`` is a ``SceneData`` (only its patch areas are used) or, for tests and quick
-    what-ifs, an array of patch areas.  ``preset`` is a preset name or a ``Quality``.
+    what-ifs, an array of patch areas.  ``preset`` is a preset name or a ``Quality``.  With
+    ``proxy`` a mesh of more than PROXY_FACTOR x the preset's proxy faces (``proxy_faces``
+    when given) is solved on a decimated proxy (radiosity.proxy), as the precompute does: its
+    own faces then cost FACE_BYTES each and the solve is the proxy's.
     """
     quality = get_preset(preset)
     if hasattr(scene_data, "area_normal"):
@@ -74,10 +79,18 @@ def estimate_precompute_memory(scene_data, preset) -> int:
     else:
         areas = np.asarray(scene_data, float)
     patches = int(np.count_nonzero(np.asarray(areas) > 0))
-    leaves = estimate_leaves(areas, quality.min_area)
+    faces = int(proxy_faces) or quality.proxy_faces
+    if proxy and patches > PROXY_FACTOR * faces:
+        # the proxy's triangles are unknown before decimation: as many equal ones
+        solve_areas = np.full(faces, float(np.sum(areas)) / faces)
+        solve_patches = faces
+        full = FACE_BYTES * patches
+    else:
+        solve_areas, solve_patches, full = areas, patches, 0
+    leaves = estimate_leaves(solve_areas, quality.min_area)
     links = estimate_links(leaves)
-    total = BASE_BYTES + LINK_BYTES * links + PATCH_BYTES * patches + LEAF_BYTES * leaves
-    return int(total + estimate_texel_memory(scene_data))
+    total = BASE_BYTES + LINK_BYTES * links + PATCH_BYTES * solve_patches + LEAF_BYTES * leaves
+    return int(total + full + estimate_texel_memory(scene_data))
 
 
 def estimate_texel_memory(scene_data) -> int:

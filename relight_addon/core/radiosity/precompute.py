@@ -316,10 +316,17 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         cX = cY = np.zeros(0, np.int64)
         if scene.n_patches > q.cluster_above:
             # Far groups of patches exchange light through cluster links: no O(P^2) start.
-            tree = build_cluster_tree(scene.corners, np.arange(scene.n_patches))
+            # The lamps stay out of the clusters: a cluster link carries one visibility for
+            # all its leaves, which the direct light's shadows cannot afford, and the lamps'
+            # links to every patch are few (lamp patches x patches) and refined as usual.
+            is_lamp = scene.lamp >= 0
+            tree = build_cluster_tree(scene.corners, np.flatnonzero(~is_lamp))
             cX, cY, cV, r0, s0 = link_clusters(
                 tree, q.separation,
                 lambda X, Y: cluster_visibility(tree, h, X, Y, occluder, q.rays, rng, scale))
+            lr, ls = initial_pairs(h, receives & ~is_lamp, sends & is_lamp, scale)
+            mr, ms = initial_pairs(h, receives & is_lamp, sends, scale)
+            r0, s0 = np.concatenate([r0, lr, mr]), np.concatenate([s0, ls, ms])
             keep = receives[r0] & sends[s0]
             r0, s0 = r0[keep], s0[keep]
             keep = facing(h, r0, s0, scale)

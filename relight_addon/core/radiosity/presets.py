@@ -29,6 +29,12 @@ class Quality:
     # on the family's tuning rooms at medium and high, 0.135 at draft, where 7 % of lamps came
     # out beyond 2 sigma at 0.05 (room 7's lamps, 55 and 121 W, pinned 15 % off): draft 0.10
     exitance_bias: float = 0.05
+    # meshes of more than PROXY_FACTOR x proxy_faces faces (scans) are solved on a decimated
+    # proxy of about proxy_faces triangles (radiosity.proxy).  On scans of family rooms (100k
+    # triangles, benchmarks/results/scan.md) the lamp-off error falls to the clean room's as the
+    # proxy grows to ~1500 at medium, then rises again where its triangles are more than the
+    # cluster links resolve (4000: room 16 0.60 -> 0.80)
+    proxy_faces: int = 1500
 
     def with_(self, **changes) -> "Quality":
         return replace(self, **changes)
@@ -36,14 +42,19 @@ class Quality:
 
 PRESETS = {
     "draft": Quality("draft", eps_bf=0.02, eps_bfv=0.01, min_area=2e-3, quadrature=1, rays=4,
-                     oracle_rays=4, passes=2, separation=0.4, exitance_bias=0.10),
+                     oracle_rays=4, passes=2, separation=0.4, exitance_bias=0.10,
+                     proxy_faces=1000),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
-                      rays=8, oracle_rays=4, passes=2, separation=0.3, confirm_rays=4),
+                      rays=8, oracle_rays=4, passes=2, separation=0.3, confirm_rays=4,
+                      proxy_faces=1500),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
-                    oracle_rays=8, separation=0.25, confirm_rays=4),
+                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=3000),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4),
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=6000),
 }
+
+
+PROXY_FACTOR = 4
 
 
 def get_preset(preset) -> Quality:

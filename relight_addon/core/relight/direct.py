@@ -60,7 +60,7 @@ def _cast(occluder, eps, origins, normals, table, lamp_normal, j0, start, count)
 
 
 def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int = 16, seed=0,
-                    exitance_scale=None):
+                    exitance_scale=None, offset=0.0):
     """Direct irradiance (n, k, 3) from each of the scene's k lamps (lamp patches and the
     ``scene.lights``): returns (unoccluded, with visibility).  ``points`` (n, 3), or (n, S, 3)
     for groups of S points whose mean is wanted (a texel's footprint), with ``normals`` (n, 3).
@@ -78,7 +78,7 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
     scale_k = np.ones(k) if exitance_scale is None else np.asarray(exitance_scale, float)
     lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
     size = float(np.linalg.norm(hi - lo))
-    eps = ray_offset(size)
+    eps = max(ray_offset(size), offset)        # ``offset``: a rough surface's bumps (proxy.py)
     rng = np.random.default_rng(seed)
     if len(scene.lights):
         lu, lo_ = light_irradiance(scene.lights, points, normals, occluder, rays,

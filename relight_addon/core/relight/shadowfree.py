@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..radiosity.precompute import Cancelled, regather, solve_basis, solve_radiosity
+from ..radiosity.presets import PROXY_FACTOR, get_preset
+from ..radiosity.proxy import build_proxy, texels_on
 from ..scene import SceneData
 from ..texture.colour import luminance
 from ..texture.mapping import patch_means, rasterize_patches, texel_elements, vertex_interpolate
@@ -69,6 +71,9 @@ class ShadowFreeOptions:
     texel_rays: int = 32
     texel_samples: int = 2              # texel footprint sampled on an s x s grid
     orient: bool = True                 # turn faces to their photographed side (orient.py)
+    # meshes of more than PROXY_FACTOR x this many faces (scans) are solved on a decimated proxy
+    # of about this many triangles (radiosity.proxy); 0: the preset's proxy_faces
+    proxy_faces: int = 0
     seed: int = 0
 
 
@@ -93,6 +98,18 @@ class ShadowFreeResult:
     # texel mode: per image (k, H, W) the part of each map that is the lamp's direct light
     # (maps.direct_fraction): a moving object's sphere shadow scales that part only
     direct: dict | None = None
+    # the scene the texels belong to (oriented; the solution's may be a proxy of it) and the
+    # texel map in the solution's patches (``texel_map`` itself unless a proxy was used)
+    scene: SceneData | None = None
+    solution_texels: object = None
+
+    def texel_light(self, scene=None, seed=0) -> TexelLight:
+        """A TexelLight on this result's texels as the run had it (shading normals, ray
+        offset, how the solution is read: a proxy's kernel), for ``scene``: the run's scene,
+        or one with other lamps (virtual lamps)."""
+        proxy = self.solution.context.get("proxy") if self.solution is not None else None
+        return _texel_light(self.scene if scene is None else scene, self.texel_map,
+                            self.occluder, self.options, seed, proxy, self.solution_texels)
 
     @property
     def exitance_scale(self) -> np.ndarray:
@@ -169,22 +186,38 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     tm = rasterize_patches(uv, image_of, shapes)
     photo = tm.gather([texels_of(im) for im in scene.images]).astype(np.float64)
     white = float(np.percentile(luminance(photo), 99)) if len(photo) else 1.0
-    texel_light = TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, opt.seed)
+
+    # A scan's dense mesh is solved on a decimated proxy (radiosity.proxy): the direct light
+    # is still cast at every texel of the full mesh, the indirect light read on the proxy.
+    proxy = _proxy(scene, opt, reuse, stage, orientation)
+    if proxy is None:
+        rad_scene, rad_tm, rad_occluder, rad_image = scene, tm, occluder, image_of
+    else:
+        if opt.mode == "element":
+            raise ValueError(f"A mesh of {scene.n_patches} faces is solved on a proxy, which "
+                             "needs the per-texel shadow removal (mode 'texel')")
+        stage(0.015, "Placing the texels on the proxy")
+        rad_scene, rad_tm = proxy.scene, texels_on(proxy, scene, tm)
+        rad_occluder = proxy.scene.make_occluder() if occluder is not None else None
+        rad_image = np.where(np.bincount(rad_tm.patch, minlength=proxy.n_patches) > 0, 0, -1)
+    texel_light = _texel_light(scene, tm, occluder, opt, opt.seed, proxy, rad_tm)
 
     # 1. Initialisation: eq 4.1 per patch, first solution, exitances, per-leaf albedo.
     stage(0.02, "Estimating reflectances (eq 4.1)")
-    patch_mean, cnt = patch_means(tm, photo, scene.n_patches)
-    use_patch = (image_of >= 0) & (cnt > 0) & (scene.lamp < 0)   # the photographed surfaces
+    patch_mean, cnt = patch_means(rad_tm, photo, rad_scene.n_patches)
+    use_patch = (rad_image >= 0) & (cnt > 0) & (rad_scene.lamp < 0)   # the photographed surfaces
     est_ids = np.flatnonzero(use_patch)
-    area = scene.area_normal()[0]
-    rho_patch = scene.rho.copy()
+    area = rad_scene.area_normal()[0]
+    rho_patch = rad_scene.rho.copy()
     est = None
     if len(est_ids):
         est = estimate_reflectance(patch_mean[est_ids], area[est_ids], opt.rho_mean)
         rho_patch[est_ids] = est.rho
-    if orientation is not None and len(orientation.back_of):      # backs reflect as fronts
-        rho_patch[-len(orientation.back_of):] = rho_patch[orientation.back_of]
-    scene1 = scene.with_rho(rho_patch)
+    backs = orientation.back_of if proxy is None and orientation is not None else \
+        (proxy.back_of if proxy is not None else ())
+    if len(backs):
+        rho_patch[-len(backs):] = rho_patch[backs]          # backs reflect as their fronts
+    scene1 = rad_scene.with_rho(rho_patch)
 
     if reuse is not None and opt.mode != "element":
         stage(0.05, "Reusing the radiosity mesh and links")
@@ -194,28 +227,33 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         solve_basis(sol, scene1.rho[sol.system.patch])    # scene exitances, eq 4.1 reflectances
     else:
         stage(0.05, "First radiosity solution")
-        sol = solve_radiosity(scene1, opt.preset, occluder=occluder, seed=opt.seed,
+        sol = solve_radiosity(scene1, opt.preset, occluder=rad_occluder, seed=opt.seed,
                               progress=stage.sub(0.05, 0.4))
+        sol.context["proxy"] = proxy
     stage(0.4, "Lamp exitances and reflectances")
-    lamps = fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light)
+    lamps = fit_lamps(sol, rad_tm, photo, use_patch, est, opt, texel_light)
     scale_k = lamps.scale
-    misfit = photo_misfit(sol, tm, photo, use_patch)
+    misfit = photo_misfit(sol, rad_tm, photo, use_patch)
 
     def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None,
                denominator=None, direct=None):
         stage(1.0, None)
         stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
+        if proxy is not None:
+            a = scene.area_normal()[0]
+            stats.update(proxy_faces=proxy.n_patches, input_faces=scene.n_patches,
+                         proxy_deviation=float(a @ proxy.deviation / max(a.sum(), 1e-300)))
         if orientation is not None:
             stats.update(flipped=orientation.per_group("flipped"),
                          two_sided=orientation.per_group("two_sided"))
         return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
                                 solution, first, stats, timings, reference_info, use_patch,
-                                denominator, occluder, direct)
+                                denominator, occluder, direct, scene, rad_tm)
 
     # 4. DRB97: the photo as it is, maps B_k / sum B.
     if opt.mode == "none":
         stage(0.9, "Display maps")
-        mp, cov = map_images(tm, ratio_maps(sol, tm, weights=scene.lamp_intensity))
+        mp, cov = map_images(tm, ratio_maps(sol, rad_tm, weights=scene.lamp_intensity))
         return result(texture_images(tm, photo, scene.images), mp, cov, sol)
 
     # 2. Per texel: direct light ray-cast at every texel, indirect from the solution.
@@ -291,6 +329,34 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     return result(texture_images(tm, t_final, scene.images), mp, cov, sol, first,
                   dict(shadowed_leaves=n_shadowed, frontier_leaves=n_frontier, referenced=n_ref,
                        default_reference=n_default), reference_info)
+
+
+# A scan's direct light is cast from this many RMS bump heights above its faces: its noise
+# would shadow grazing rays that the photographed, smooth surface lets through.
+BUMPS = 3.0
+
+
+def _texel_light(scene, tm, occluder, opt, seed, proxy, solution_texels):
+    """Per-texel light on ``tm`` of ``scene``; on a proxy's scan: its shading normals, rays
+    lifted over its bumps, the solution read by the proxy's kernel."""
+    return TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, seed,
+                      solution_texels=solution_texels,
+                      normals=None if proxy is None else proxy.normals[tm.patch],
+                      smooth_read=proxy is not None,
+                      offset=0.0 if proxy is None else BUMPS * proxy.roughness)
+
+
+def _proxy(scene, opt, reuse, stage, orientation):
+    """The radiosity proxy of a scene with more faces than the preset solves (None when it
+    has not), or the one ``reuse`` was solved on."""
+    if reuse is not None and opt.mode != "element":
+        return reuse.context.get("proxy")
+    faces = opt.proxy_faces or get_preset(opt.preset).proxy_faces
+    surfaces = int(np.count_nonzero(scene.lamp < 0))
+    if surfaces <= PROXY_FACTOR * faces:
+        return None
+    stage(0.012, f"Decimating {surfaces} faces to a proxy of {faces}")
+    return build_proxy(scene, faces, None if orientation is None else orientation.back_of)
 
 
 def _stats(sol, first):

@@ -27,8 +27,17 @@ class TexelLight:
     """Irradiance at the texels of ``tm`` (a TexelMap of ``scene``): ``rays`` visibility rays per
     lamp patch, each texel's footprint sampled on a ``samples`` x ``samples`` grid."""
 
-    def __init__(self, scene, tm, occluder, rays=32, samples=2, seed=0):
+    def __init__(self, scene, tm, occluder, rays=32, samples=2, seed=0, solution_texels=None,
+                 normals=None, smooth_read=False, offset=0.0):
         self.scene, self.tm, self.occluder = scene, tm, occluder
+        self.normals = normals        # (T, 3) shading normals instead of the faces' own
+        # indirect light read by a kernel over the leaves (radiosity.proxy.SmoothRead) instead
+        # of interpolated over the solution's elements
+        self.smooth_read = smooth_read
+        self.offset = offset          # ray origins lifted at least this far off the surface
+        self._reader = (None, None)
+        # where the solution's leaves are read (a radiosity proxy's own patches: proxy.py)
+        self.solution_texels = tm if solution_texels is None else solution_texels
         self.rays, self.samples, self.seed = rays, samples, seed
         self._direct = None
 
@@ -49,15 +58,34 @@ class TexelLight:
         """((direct occluded, direct unoccluded), (indirect occluded, indirect unoccluded)) per
         texel and lamp, each (k, T, 3): the two terms of :meth:`irradiance`."""
         Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
-        elem = texel_elements(sol.hierarchy, self.tm)
-        ind_occ = np.stack([vertex_interpolate(sol.hierarchy, o - d, self.tm, elem)
-                            for o, d in zip(Hocc_k, Docc_k)])
-        ind_un = np.stack([vertex_interpolate(sol.hierarchy, u - d, self.tm, elem)
-                           for u, d in zip(HU_k, DU_k)])
+        read = self.reader(sol)
+        ind_occ = np.stack([read(o - d) for o, d in zip(Hocc_k, Docc_k)])
+        ind_un = np.stack([read(u - d) for u, d in zip(HU_k, DU_k)])
         U1, O1 = self.direct()
         s = np.asarray(scale, float)[None, :, None]
         U, O = np.moveaxis(U1 * s, 1, 0), np.moveaxis(O1 * s, 1, 0)      # (k, T, 3)
         return (O, U), (ind_occ, ind_un)
+
+    def reader(self, sol):
+        """Leaf values -> per-texel values, for the solution's current leaves."""
+        key = (id(sol.hierarchy), len(sol.leaves))
+        if self._reader[0] == key:
+            return self._reader[1]
+        if self.smooth_read:
+            from ..radiosity.proxy import SmoothRead
+            tm = self.tm
+            points = bilinear_point(self.scene.corners[tm.patch], tm.u, tm.v)
+            normals = self.normals if self.normals is not None else \
+                self.scene.area_normal()[1][tm.patch]
+            read = SmoothRead(sol.hierarchy, sol.leaves, points, normals)
+        else:
+            stm = self.solution_texels
+            elem = texel_elements(sol.hierarchy, stm)
+
+            def read(values):
+                return vertex_interpolate(sol.hierarchy, values, stm, elem)
+        self._reader = (key, read)
+        return read
 
     def _cast(self):
         scene, tm = self.scene, self.tm
@@ -75,8 +103,11 @@ class TexelLight:
             pts, nrm, n_sub = footprint_points(scene, patch[sl], u[sl], v[sl], centre[sl],
                                                size[sl], self.samples)
             # the mean over each texel's footprint (a photo texel integrates it too)
+            if self.normals is not None:
+                nrm = np.repeat(self.normals[sl], n_sub, axis=0)
             U[sl], O[sl] = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub],
-                                           self.occluder, self.rays, self.seed + 11 + c0)
+                                           self.occluder, self.rays, self.seed + 11 + c0,
+                                           offset=self.offset)
 
         starts = range(0, T, TEXEL_CHUNK)
         if len(starts) > 1:

@@ -27,7 +27,6 @@ import numpy as np
 
 from ..lights import Lights
 from ..radiosity.precompute import lights_on_elements
-from ..texture.mapping import texel_elements, vertex_interpolate
 from .maps import direct_fraction, fraction_images, map_images, maps_from
 from .texel import TexelLight
 from .transport import Transport
@@ -69,7 +68,10 @@ def add_lamps(result, lights: Lights, names, seed=0):
     k0 = sol.scene.n_lamps
     q = sol.quality
     size = sol.context.get("scale", 1.0)
-    occluder = result.occluder
+    proxy = sol.context.get("proxy")
+    # (a proxy's leaves are lit against the proxy, the texels against the full mesh)
+    occluder = sol.context.get("occluder", result.occluder) if proxy is not None \
+        else result.occluder
     # The new lamps' direct light on every leaf, then their bases on the existing system.
     lit_scene = _only_lights(scene, rows)
     occ, unocc = lights_on_elements(lit_scene, sol.hierarchy, sol.leaves, occluder,
@@ -91,13 +93,15 @@ def add_lamps(result, lights: Lights, names, seed=0):
     # Per texel: direct by ray casting (the new lamps only), indirect from the new bases.
     tm = result.texel_map
     opt = result.options
-    U1, O1 = TexelLight(lit_scene, tm, occluder, opt.texel_rays, opt.texel_samples,
-                        opt.seed + 101).direct()
+    texels_of = result.scene if result.scene is not None else sol.scene
+    light = result.texel_light(_only_lights(_with_lamps(texels_of, lights, names)[0], rows),
+                               opt.seed + 101)
+    U1, O1 = light.direct()
     tr = Transport(new_sol)
     b_new = new_sol.basis[k0:]
     indirect = tr.per_lamp(tr.occ, b_new) - tr.per_lamp(tr.dir_occ, b_new)  # (m, L, 3)
-    elem = texel_elements(sol.hierarchy, tm)
-    H_new = np.stack([vertex_interpolate(sol.hierarchy, x, tm, elem) for x in indirect])
+    read = light.reader(new_sol)
+    H_new = np.stack([read(x) for x in indirect])
     H_new = np.maximum(np.moveaxis(O1[:, k0:] * s, 1, 0) + H_new, 0.0)    # (m, T, 3)
     new_maps, _ = map_images(tm, maps_from(H_new, result.denominator))
     maps = {i: np.concatenate([result.maps[i], new_maps[i]]) for i in result.maps}
@@ -145,6 +149,9 @@ def add_objects(result, scene, progress=None):
     from .maps import FACTOR_MAX
     if result.denominator is None:
         raise ValueError("virtual objects are added to a per-texel result only")
+    if result.solution.context.get("proxy") is not None:
+        raise ValueError("Virtual objects in a scanned room (a mesh solved on a proxy) are not "
+                         "supported yet")
     base = result.solution.scene                 # the room as precomputed (oriented, backs)
     objects = scene.virtual_last()
     extra = slice(int((~objects.virtual).sum()), objects.n_patches)

@@ -1,0 +1,262 @@
+"""Scanned rooms: the precompute of dense, noisy triangle meshes (issue 10 "Scale").
+
+Family rooms (scenes/family.py) re-meshed as scans (scenes/scan.py: ~N triangles, 2 mm of
+normal noise, jittered vertices; the photo textures and the Cycles truth stay valid texel for
+texel) are read through the add-on's reader and precomputed by ``shadow_free`` as the
+Precompute button does: meshes of more than PROXY_FACTOR x the preset's proxy faces are solved
+on a decimated proxy (core/radiosity/proxy.py).  Each case runs in its own process, so that
+its peak RSS is its own.  Reported per case: wall time of the precompute, peak RSS and the RSS
+after reading (Blender, the scene and its images), the memory estimate the operator checks
+before it starts, and the lamp-off error against the Cycles truth (mean CIEDE2000 over the
+lamp-off / only-one-lamp targets, overall and in the switched-off lamps' former shadows, as
+benchmarks/bench_family.py), beside the same room read as its clean quads.
+
+    python benchmarks/bench_scan.py                       # everything (~25 min)
+    python benchmarks/bench_scan.py --quick               # the memory / time scaling only
+
+Writes benchmarks/results/scan.md, scan_raw.json and scan.png.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+NOISE = 0.002
+ROOMS = (0, 16, 5, 3)
+PRESETS = ("draft", "medium", "high")
+SIZES = (25_000, 50_000, 100_000, 200_000)
+PROXY_CURVE = (500, 1000, 1500, 3000, 6000)
+
+
+def child(room, faces, preset, proxy_faces):
+    import resource
+
+    import numpy as np
+    sys.path.insert(0, str(ROOT))
+    from relight_addon.core.radiosity import presets as P
+    from relight_addon.core.radiosity.memory import estimate_precompute_memory
+    from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
+    from scenes import family_eval as fe
+    if proxy_faces:
+        P.PRESETS[preset] = P.PRESETS[preset].with_(proxy_faces=proxy_faces)
+    t0 = time.perf_counter()
+    r = fe.photographed_room(room, "exact",
+                             scan=dict(triangles=faces, noise=NOISE) if faces else None)
+    read_s = time.perf_counter() - t0
+    rss_read = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    estimate = estimate_precompute_memory(r.data, preset) / 2**20
+    without_proxy = estimate_precompute_memory(r.data, preset, proxy=False) / 2**20
+    t0 = time.perf_counter()
+    res = shadow_free(r.data, ShadowFreeOptions(preset=preset))
+    seconds = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    sc = fe.score(r, res)
+    off = {k: v for k, v in sc["targets"].items() if k.endswith(" off") or k.startswith("only")}
+    if not off:                                   # one lamp: its doubling
+        off = {k: v for k, v in sc["targets"].items() if k.endswith("x2")}
+
+    def mean(key, part):
+        vals = [v[key][part][0] for v in off.values()
+                if part == "all" or v[key]["shadow_texels"] >= 20]
+        return float(np.nanmean(vals)) if vals else float("nan")
+    st = res.stats
+    proxy = res.solution.context.get("proxy")
+    print(json.dumps({
+        "room": room, "faces": int(r.data.n_patches), "preset": preset,
+        "proxy_setting": proxy_faces, "read_s": read_s, "seconds": seconds,
+        "rss_read_mb": rss_read, "peak_mb": peak, "estimate_mb": estimate,
+        "estimate_without_proxy_mb": without_proxy,
+        "proxy_faces": int(st.get("proxy_faces", 0)), "leaves": int(st["leaves"]),
+        "links": int(st["links"]), "deviation_mm": 1000 * float(st.get("proxy_deviation", 0)),
+        "roughness_mm": 1000 * float(proxy.roughness) if proxy is not None else 0.0,
+        "timings": {k: float(v) for k, v in res.timings.items()},
+        "floor": float(sc["floor"][0]), "ratio_error": float(sc["ratio_error"]),
+        "relit_all": mean("relit", "all"), "relit_shadow": mean("relit", "shadow"),
+        "scale_all": mean("scale", "all"), "scale_shadow": mean("scale", "shadow"),
+        "applied": [bool(x) for x in res.lamps.applied]}))
+
+
+def run(room, faces, preset, proxy_faces=0, timeout=1800):
+    cmd = [sys.executable, __file__, "--child", str(room), str(faces), preset, str(proxy_faces)]
+    t0 = time.perf_counter()
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"room": room, "faces": faces, "preset": preset, "status": "timeout"}
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith("{")]
+    if not lines:
+        return {"room": room, "faces": faces, "preset": preset, "status": "failed",
+                "stderr": out.stderr[-2000:], "seconds": time.perf_counter() - t0}
+    rec = json.loads(lines[-1])
+    rec["status"] = "ok"
+    print(f"{time.strftime('%H:%M:%S')} room {room} {faces} faces {preset} "
+          f"(proxy {proxy_faces or 'preset'}): {rec['seconds']:.1f} s, peak {rec['peak_mb']:.0f} "
+          f"MB, lamp off {rec['relit_all']:.2f} / {rec['relit_shadow']:.2f}", flush=True)
+    return rec
+
+
+def _f(x, nd=2):
+    return "-" if x is None or x != x else f"{x:.{nd}f}"
+
+
+def write(records, path_md, path_png):
+    import numpy as np
+    ok = [r for r in records if r.get("status") == "ok"]
+    lines = ["# Scanned rooms: dense noisy meshes solved on a proxy", "",
+             "Generated by `benchmarks/bench_scan.py` (see its docstring).  Family rooms "
+             f"re-meshed as scans (`scenes/scan.py`: {NOISE * 1000:.0f} mm of normal noise, "
+             "jittered vertices), read by the add-on's reader and precomputed as the Precompute "
+             "button does; the clean room (its quads) beside each.  Lamp off: mean CIEDE2000 "
+             "against the Cycles truth over the lamp-off and only-one-lamp targets (a one-lamp "
+             "room: its doubling), overall / in the switched-off lamps' former shadows; "
+             "\"global scale\" is the photo scaled by the best single factor.  Peak RSS "
+             "includes Blender (bpy), the scene and its images: \"after read\" is that part.",
+             ""]
+    main = [r for r in ok if r.get("proxy_setting", 0) == 0 and r["faces"] <= 120_000]
+    if main:
+        lines += ["## Rooms x presets (scan of ~100k triangles vs the clean room)", "",
+                  "| room | preset | mesh | faces | proxy faces | leaves | links | time s | "
+                  "peak RSS MB (after read) | lamp off: all / shadow | global scale | noise "
+                  "floor | ratio error |",
+                  "|---|---|---|---:|---:|---:|---:|---:|---|---|---|---:|---:|"]
+        for r in sorted(main, key=lambda r: (r["room"], PRESETS.index(r["preset"]), r["faces"])):
+            mesh = "scan" if r["faces"] > 1000 else "clean"
+            lines.append(
+                f"| {r['room']} | {r['preset']} | {mesh} | {r['faces']:,} | "
+                f"{r['proxy_faces'] or '-'} | {r['leaves']:,} | {r['links']:,} | "
+                f"{r['seconds']:.1f} | {r['peak_mb']:.0f} ({r['rss_read_mb']:.0f}) | "
+                f"{_f(r['relit_all'])} / {_f(r['relit_shadow'])} | "
+                f"{_f(r['scale_all'])} / {_f(r['scale_shadow'])} | {_f(r['floor'])} | "
+                f"{r['ratio_error']:.3f} |")
+        lines.append("")
+        for preset in PRESETS:
+            pairs = []
+            for room in sorted({r["room"] for r in main}):
+                c = [r for r in main if r["room"] == room and r["preset"] == preset]
+                scan = [r for r in c if r["faces"] > 1000]
+                clean = [r for r in c if r["faces"] <= 1000]
+                if scan and clean:
+                    pairs.append((scan[0], clean[0]))
+            if pairs:
+                s_all = [p[0]["relit_all"] for p in pairs]
+                c_all = [p[1]["relit_all"] for p in pairs]
+                s_sh = [p[0]["relit_shadow"] for p in pairs]
+                c_sh = [p[1]["relit_shadow"] for p in pairs]
+                lines.append(
+                    f"- {preset}: scan {np.mean(s_all):.2f} (worst {np.max(s_all):.2f}) / "
+                    f"{np.nanmean(s_sh):.2f} (worst {np.nanmax(s_sh):.2f}) against clean "
+                    f"{np.mean(c_all):.2f} (worst {np.max(c_all):.2f}) / {np.nanmean(c_sh):.2f} "
+                    f"(worst {np.nanmax(c_sh):.2f}), over {len(pairs)} rooms; scan time "
+                    f"{np.mean([p[0]['seconds'] for p in pairs]):.1f} s, peak "
+                    f"{np.max([p[0]['peak_mb'] for p in pairs]):.0f} MB")
+        lines.append("")
+    sizes = [r for r in ok if r["room"] == 0 and r["preset"] == "medium"
+             and r.get("proxy_setting", 0) == 0 and r["faces"] > 1000]
+    if sizes:
+        lines += ["## Memory and time against the mesh size (room 0, medium)", "",
+                  "| faces | time s | read s | peak RSS MB | after read MB | precompute MB "
+                  "(peak - after read) | estimate MB | estimate without the proxy MB | "
+                  "lamp off |",
+                  "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+        for r in sorted(sizes, key=lambda r: r["faces"]):
+            lines.append(
+                f"| {r['faces']:,} | {r['seconds']:.1f} | {r['read_s']:.1f} | "
+                f"{r['peak_mb']:.0f} | {r['rss_read_mb']:.0f} | "
+                f"{r['peak_mb'] - r['rss_read_mb']:.0f} | {r['estimate_mb']:.0f} | "
+                f"{r['estimate_without_proxy_mb']:,.0f} | {_f(r['relit_all'])} / "
+                f"{_f(r['relit_shadow'])} |")
+        lines.append("")
+        big = max(sizes, key=lambda r: r["faces"])
+        lines.append(f"Timings of the largest ({big['faces']:,} faces), s: " + ", ".join(
+            f"{k} {v:.1f}" for k, v in big["timings"].items()) + ".")
+        lines.append("")
+    curve = [r for r in ok if r.get("proxy_setting", 0)]
+    if curve:
+        lines += ["## The proxy's size: speed against accuracy (room 0, ~100k faces, medium)",
+                  "", "| proxy faces asked | got | leaves | links | time s | peak RSS MB | "
+                  "lamp off: all / shadow |", "|---:|---:|---:|---:|---:|---:|---|"]
+        for r in sorted(curve, key=lambda r: r["proxy_setting"]):
+            lines.append(f"| {r['proxy_setting']:,} | {r['proxy_faces']:,} | {r['leaves']:,} | "
+                         f"{r['links']:,} | {r['seconds']:.1f} | {r['peak_mb']:.0f} | "
+                         f"{_f(r['relit_all'])} / {_f(r['relit_shadow'])} |")
+        lines.append("")
+    bad = [r for r in records if r.get("status") != "ok"]
+    if bad:
+        lines += ["Failed or timed out: " + ", ".join(
+            f"room {r['room']} {r['faces']} {r['preset']} ({r['status']})" for r in bad), ""]
+    load = os.getloadavg()
+    lines.append(f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+                 f"{platform.python_version()}; load average at the end {load[0]:.2f}.  "
+                 f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.")
+    path_md.write_text("\n".join(lines) + "\n")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    if sizes:
+        s = sorted(sizes, key=lambda r: r["faces"])
+        f = [r["faces"] for r in s]
+        ax[0].plot(f, [r["seconds"] for r in s], "o-", label="precompute s")
+        ax[0].plot(f, [(r["peak_mb"] - r["rss_read_mb"]) / 100 for r in s], "s-",
+                   label="precompute memory (100 MB)")
+        ax[0].plot(f, [r["estimate_mb"] / 100 for r in s], "x--", label="estimate (100 MB)")
+        ax[0].set_xlabel("faces of the scan")
+        ax[0].set_title("room 0, medium")
+        ax[0].legend()
+    if curve:
+        c = sorted(curve, key=lambda r: r["proxy_setting"])
+        ax[1].plot([r["seconds"] for r in c], [r["relit_all"] for r in c], "o-", label="all")
+        ax[1].plot([r["seconds"] for r in c], [r["relit_shadow"] for r in c], "s-",
+                   label="former shadows")
+        for r in c:
+            ax[1].annotate(str(r["proxy_setting"]), (r["seconds"], r["relit_all"]))
+        ax[1].set_xlabel("precompute s")
+        ax[1].set_ylabel("lamp off, mean CIEDE2000")
+        ax[1].set_title("proxy faces (room 0 scan, medium)")
+        ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(path_png, dpi=80)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--child", nargs=4)
+    ap.add_argument("--quick", action="store_true", help="the size scaling only")
+    ap.add_argument("--rooms", nargs="*", type=int, default=list(ROOMS))
+    ap.add_argument("--presets", nargs="*", default=list(PRESETS))
+    ap.add_argument("--faces", type=int, default=100_000)
+    args = ap.parse_args(argv)
+    if args.child:
+        room, faces, preset, pf = args.child
+        child(int(room), int(faces), preset, int(pf))
+        return
+    records = []
+    for n in SIZES:
+        records.append(run(0, n, "medium"))
+    if not args.quick:
+        for pf in PROXY_CURVE:
+            records.append(run(0, args.faces, "medium", pf))
+        for room in args.rooms:
+            for preset in args.presets:
+                records.append(run(room, 0, preset))
+                if not (room == 0 and preset == "medium" and args.faces in SIZES):
+                    records.append(run(room, args.faces, preset))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "scan_raw.json").write_text(json.dumps(records, indent=1))
+    write(records, RESULTS / "scan.md", RESULTS / "scan.png")
+    print((RESULTS / "scan.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
