@@ -33,7 +33,8 @@ class Quality:
     # proxy of about proxy_faces triangles (radiosity.proxy).  On scans of family rooms (100k
     # triangles, benchmarks/results/scan.md) the lamp-off error falls to the clean room's as the
     # proxy grows to ~1500 at medium, then rises again where its triangles are more than the
-    # cluster links resolve (4000: room 16 0.60 -> 0.80)
+    # cluster links resolve (4000: room 16 0.60 -> 0.80, room 3 0.87 -> 2.15; high at 3000:
+    # room 0 0.58 -> 0.86), so the finer presets keep 1500 until cluster links improve
     proxy_faces: int = 1500
 
     def with_(self, **changes) -> "Quality":
@@ -48,9 +49,9 @@ PRESETS = {
                       rays=8, oracle_rays=4, passes=2, separation=0.3, confirm_rays=4,
                       proxy_faces=1500),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
-                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=3000),
+                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=1500),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=6000),
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=1500),
 }
 
 

@@ -103,13 +103,14 @@ class ShadowFreeResult:
     scene: SceneData | None = None
     solution_texels: object = None
 
-    def texel_light(self, scene=None, seed=0) -> TexelLight:
+    def texel_light(self, scene=None, seed=0, occluder=None) -> TexelLight:
         """A TexelLight on this result's texels as the run had it (shading normals, ray
         offset, how the solution is read: a proxy's kernel), for ``scene``: the run's scene,
-        or one with other lamps (virtual lamps)."""
+        or one with other lamps or objects (virtual ones, with their ``occluder``)."""
         proxy = self.solution.context.get("proxy") if self.solution is not None else None
         return _texel_light(self.scene if scene is None else scene, self.texel_map,
-                            self.occluder, self.options, seed, proxy, self.solution_texels)
+                            self.occluder if occluder is None else occluder, self.options,
+                            seed, proxy, self.solution_texels)
 
     @property
     def exitance_scale(self) -> np.ndarray:

@@ -28,7 +28,6 @@ import numpy as np
 from ..lights import Lights
 from ..radiosity.precompute import lights_on_elements
 from .maps import direct_fraction, fraction_images, map_images, maps_from
-from .texel import TexelLight
 from .transport import Transport
 
 
@@ -145,13 +144,9 @@ def add_objects(result, scene, progress=None):
     """A copy of ``result`` (the precompute of ``scene`` without its virtual objects, per
     texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``)."""
     from ..radiosity.precompute import solve_basis, solve_radiosity
-    from ..scene import SceneData
     from .maps import FACTOR_MAX
     if result.denominator is None:
         raise ValueError("virtual objects are added to a per-texel result only")
-    if result.solution.context.get("proxy") is not None:
-        raise ValueError("Virtual objects in a scanned room (a mesh solved on a proxy) are not "
-                         "supported yet")
     base = result.solution.scene                 # the room as precomputed (oriented, backs)
     objects = scene.virtual_last()
     extra = slice(int((~objects.virtual).sum()), objects.n_patches)
@@ -166,33 +161,48 @@ def add_objects(result, scene, progress=None):
         den = np.bincount(sol.system.patch, a, base.n_patches)
         rho[:, c] = np.where(den > 0, num / np.maximum(den, 1e-300), rho[:, c])
     room = base.with_rho(rho)
+    # Solved without and with the objects; on a scan, the room solved is its proxy and the
+    # texels' direct light is cast on the full mesh (with the objects too).
+    pairs = [(room, room), (_with_objects(room, objects, extra), None)]
+    if sol.context.get("proxy") is not None:
+        full = result.scene
+        pairs = [(room, full), (pairs[1][0], _with_objects(full, objects, extra))]
+    opt = result.options
+    scale = result.exitance_scale
+    tm = result.texel_map
+    H = []
+    for solved, lit in pairs:
+        occ = solved.make_occluder()
+        s = solve_radiosity(solved, opt.preset, occluder=occ, seed=opt.seed)
+        solve_basis(s, solved.rho[s.system.patch], scale)
+        lit = solved if lit is None else lit
+        light = result.texel_light(lit, opt.seed + 202,
+                                   occluder=occ if lit is solved else lit.make_occluder())
+        H.append(light.irradiance(s, scale)[0])                                 # (k, T, 3)
+    without, with_ = H
+    ratio = np.where(without > 0, with_ / np.where(without > 0, without, 1.0), 1.0)
+    ratio = np.clip(ratio, 0.0, FACTOR_MAX)
+    new_maps, _ = map_images(tm, _texel_maps(result) * ratio)
+    return dataclasses.replace(result, maps=new_maps)
+
+
+def _with_objects(room, objects, extra):
+    """``room`` (a SceneData) with the patches ``extra`` of ``objects`` appended: they take no
+    texels of the photos."""
+    from ..scene import SceneData
     combined = object.__new__(SceneData)
     combined.__dict__.update(room.__dict__)
     n_extra = extra.stop - extra.start
     for name in room._per_patch_arrays():
         add = getattr(objects, name)
-        if name == "image":                  # the objects take no texels of the photos
+        if name == "image":
             add = np.full(n_extra, -1)
         elif add is None:                    # uv of a scene without UVs
             add = np.zeros((n_extra, 4, 2))
         else:
             add = add[extra]
         setattr(combined, name, np.concatenate([getattr(room, name), add]))
-    opt = result.options
-    scale = result.exitance_scale
-    tm = result.texel_map
-    H = []
-    for sc in (room, combined):
-        occ = sc.make_occluder()
-        s = solve_radiosity(sc, opt.preset, occluder=occ, seed=opt.seed)
-        solve_basis(s, sc.rho[s.system.patch], scale)
-        H.append(TexelLight(sc, tm, occ, opt.texel_rays, opt.texel_samples,
-                            opt.seed + 202).irradiance(s, scale)[0])              # (k, T, 3)
-    without, with_ = H
-    ratio = np.where(without > 0, with_ / np.where(without > 0, without, 1.0), 1.0)
-    ratio = np.clip(ratio, 0.0, FACTOR_MAX)
-    new_maps, _ = map_images(tm, _texel_maps(result) * ratio)
-    return dataclasses.replace(result, maps=new_maps)
+    return combined
 
 
 def _texel_maps(result):
