@@ -20,12 +20,14 @@ clear message instead of swapping or being killed.  The model is fitted on
   input patch (cluster tree, visibility structures and the sparse factors of the solve) over a
   ~60 MB baseline (Python + numpy + scipy); the fit is within -30 % .. +50 % of every measured
   case.  ``LEAF_BYTES`` covers the per-element arrays of the subdivided leaves.
+* A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
+  faces) is estimated as the proxy's solve plus ``FACE_BYTES`` per input face.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
   every used image ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of
   ``RAY_CHUNK_BYTES``: measured on the office (2 lamps, texel mode, draft, two ray-casting
-  threads), peak RSS 267 MB at 18k texels and 997 MB at 1.17 M texels, i.e. about 400 bytes
-  per texel with 2 lamps over a constant of two ray chunks in flight (590 MB at 73k texels;
-  benchmarks/results/texel_scaling.md).
+  threads of 8k texels), peak RSS 212 MB at 18k texels, 365 MB at 293k, 1008 MB at 1.17 M and
+  3457 MB at 4.7 M, i.e. about 700 bytes per texel with 2 lamps over ~230 MB
+  (benchmarks/results/texel_scaling.md).
 """
 from __future__ import annotations
 
@@ -40,10 +42,12 @@ LINK_BYTES = 2 * 1024
 PATCH_BYTES = 144 * 1024
 LEAF_BYTES = 8 * 1024
 LINKS_PER_LEAF_LOG = 6.0
-TEXEL_BYTES = 160
-TEXEL_LAMP_BYTES = 140
-RAY_CHUNK_BYTES = 550 * 2**20    # two ray-casting threads, ~250 MB of rays each
-FACE_BYTES = 4 * 1024            # per input face of a mesh solved on a proxy (measured below)
+TEXEL_BYTES = 200
+TEXEL_LAMP_BYTES = 250
+RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.TEXEL_CHUNK)
+# per input face of a mesh solved on a proxy: family room 0 as a scan of 25k-200k faces at
+# medium (benchmarks/results/scan.md) took 471-774 MB over the read, 1.7 kB more a face
+FACE_BYTES = 2 * 1024
 
 
 def estimate_leaves(areas, min_area_fraction) -> float:

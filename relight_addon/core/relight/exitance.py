@@ -248,6 +248,9 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     t_lum = luminance(photo)
     ok = (t_lum[pairs[:, 0]] > 0) & (t_lum[pairs[:, 1]] > 0)
     pairs = pairs[ok]
+    if len(pairs) > EDGE_PAIRS:          # photo-resolution textures: a seeded sample of pairs
+        pairs = pairs[np.sort(np.random.default_rng(11).choice(len(pairs), EDGE_PAIRS,
+                                                               replace=False))]
     a, b = pairs[:, 0], pairs[:, 1]
     dlog_t = np.log(t_lum[a]) - np.log(t_lum[b])
     Da, Db, Ia, Ib = D[:, a], D[:, b], I[:, a], I[:, b]
@@ -321,6 +324,10 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # the element-level indirect light does not resolve) wanted g = 0.2-0.4 where most pieces
 # wanted 1.7-2.5, pulled rho^ to 0.29 (true area mean 0.47) and biased every lamp ratio (the
 # weakest lamp by +43 %).
+# The shadow-edge fit reads at most this many neighbouring texel pairs (every pair of the
+# family's rooms, up to 512 texels a wall: ~0.9 M; the office at 1.17 M texels has 2.3 M, and
+# its Nelder-Mead took 25 of the precompute's 46 s on all of them)
+EDGE_PAIRS = 1_000_000
 VOTE_CELLS = 4
 VOTE_CELL_TEXELS = 32
 VOTE_STEP = 2                                 # grid steps (0.25 in log g)

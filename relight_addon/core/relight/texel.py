@@ -15,12 +15,12 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..scene import bilinear_point
-from ..texture.mapping import (inverse_bilinear, inverse_triangle, texel_elements,
+from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
                                uv_patch_is_triangle, vertex_interpolate)
 from .direct import lamp_irradiance
 from .transport import Transport
 
-TEXEL_CHUNK = 1 << 15     # texels whose direct light is computed at once
+TEXEL_CHUNK = 1 << 13     # texels whose direct light is computed at once
 
 
 class TexelLight:
@@ -80,10 +80,10 @@ class TexelLight:
             read = SmoothRead(sol.hierarchy, sol.leaves, points, normals)
         else:
             stm = self.solution_texels
-            elem = texel_elements(sol.hierarchy, stm)
+            interpolation = CornerInterpolation(sol.hierarchy, stm)
 
             def read(values):
-                return vertex_interpolate(sol.hierarchy, values, stm, elem)
+                return vertex_interpolate(sol.hierarchy, values, stm, interpolation=interpolation)
         self._reader = (key, read)
         return read
 

@@ -573,35 +573,46 @@ def vertex_values(hierarchy, leaf_values, across_patches: bool = False, tol: flo
     return out.reshape((nl, 4) + vals.shape[1:])
 
 
+class CornerInterpolation:
+    """Per-texel values (T, C) bilinear in their leaf's four corner values (n_leaves, 4, C):
+    the texels' leaves and parameters found once, for any number of value sets."""
+
+    def __init__(self, hierarchy, texel_map: TexelMap, element_ids=None):
+        leaves = hierarchy.leaves()
+        if element_ids is None:
+            element_ids = texel_elements(hierarchy, texel_map)
+        pos = np.full(hierarchy.n, -1, np.int64)
+        pos[leaves] = np.arange(len(leaves))
+        self.leaf = pos[element_ids]
+        if np.any(self.leaf < 0):
+            raise ValueError("element_ids must be leaves of the hierarchy")
+        param = hierarchy.param[element_ids]                      # axis-aligned boxes
+        u0, v0 = param[:, 0, 0], param[:, 0, 1]
+        s = np.clip((texel_map.u - u0) / (param[:, 2, 0] - u0), 0.0, 1.0)[:, None]
+        t = np.clip((texel_map.v - v0) / (param[:, 2, 1] - v0), 0.0, 1.0)[:, None]
+        self.weights = ((1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t)
+
+    def __call__(self, corner_values):
+        cv = np.asarray(corner_values, np.float64)
+        cv2 = cv.reshape(cv.shape[0], 4, -1)[self.leaf]
+        out = sum(w * cv2[:, i] for i, w in enumerate(self.weights))
+        return out.reshape((len(out),) + cv.shape[2:])
+
+
 def interpolate_corner_values(hierarchy, corner_values, texel_map: TexelMap, element_ids=None):
     """Per-texel value (T, C) bilinear in the leaf's four corner values (n_leaves, 4, C)."""
-    leaves = hierarchy.leaves()
-    if element_ids is None:
-        element_ids = texel_elements(hierarchy, texel_map)
-    pos = np.full(hierarchy.n, -1, np.int64)
-    pos[leaves] = np.arange(len(leaves))
-    lp = pos[element_ids]
-    if np.any(lp < 0):
-        raise ValueError("element_ids must be leaves of the hierarchy")
-    param = hierarchy.param[element_ids]                          # axis-aligned boxes
-    u0, v0 = param[:, 0, 0], param[:, 0, 1]
-    du = param[:, 2, 0] - u0
-    dv = param[:, 2, 1] - v0
-    s = np.clip((texel_map.u - u0) / du, 0.0, 1.0)[:, None]
-    t = np.clip((texel_map.v - v0) / dv, 0.0, 1.0)[:, None]
-    cv = np.asarray(corner_values, np.float64)
-    cv2 = cv.reshape(cv.shape[0], 4, -1)[lp]
-    a, b, c, d = cv2[:, 0], cv2[:, 1], cv2[:, 2], cv2[:, 3]
-    out = (1 - s) * (1 - t) * a + s * (1 - t) * b + s * t * c + (1 - s) * t * d
-    return out.reshape((len(out),) + cv.shape[2:])
+    return CornerInterpolation(hierarchy, texel_map, element_ids)(corner_values)
 
 
 def vertex_interpolate(hierarchy, leaf_values, texel_map: TexelMap, element_ids=None,
-                       across_patches: bool = False):
+                       across_patches: bool = False, interpolation=None):
     """Per-texel values (T, C) interpolated from element-vertex values (seed 000 footnote:
     smooth display).  Corner values: :func:`vertex_values`; interpolation:
-    :func:`interpolate_corner_values`."""
+    :func:`interpolate_corner_values` (or ``interpolation``, a CornerInterpolation made
+    for the same hierarchy and texels)."""
     corner = vertex_values(hierarchy, leaf_values, across_patches=across_patches)
+    if interpolation is not None:
+        return interpolation(corner)
     return interpolate_corner_values(hierarchy, corner, texel_map, element_ids)
 
 
