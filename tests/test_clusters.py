@@ -90,3 +90,15 @@ def test_clustered_cornell_box_matches_mitsuba():
     print(f"clustered Cornell box: mean rel err {rel[:16].mean():.4f}, max {rel[:16].max():.4f}")
     assert rel[:16].mean() < 0.04
     assert np.all(np.isfinite(B))
+
+
+def test_a_scene_of_lamp_patches_only_is_still_clustered():
+    """Lamp patches link to every patch outside the clusters, unless that is too many pairs or
+    there is nothing else: a closed furnace whose 486 faces all emit (one lamp) is clustered
+    as before and stays exact (B = E / (1 - rho))."""
+    from scenes.testscenes import closed_cube
+    scene = closed_cube(rho=0.5, emission=1.0, n=9)
+    assert scene.n_patches > PRESETS["draft"].cluster_above and np.all(scene.lamp >= 0)
+    sol = solve_radiosity(scene, "draft")
+    assert sol.counts["cluster_links"] > 1000
+    assert np.abs(sol.patch_radiosity() / 2.0 - 1.0).max() < 0.01
