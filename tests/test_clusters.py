@@ -93,7 +93,7 @@ def test_clustered_cornell_box_matches_mitsuba():
 
 
 def test_a_scene_of_lamp_patches_only_is_still_clustered():
-    """Lamp patches link to every patch outside the clusters, unless that is too many pairs or
+    """Lamp patches link to every patch outside the clusters, unless there are too many or
     there is nothing else: a closed furnace whose 486 faces all emit (one lamp) is clustered
     as before and stays exact (B = E / (1 - rho))."""
     from scenes.testscenes import closed_cube

@@ -30,9 +30,11 @@ from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
 
 MAX_REFINE_ROUNDS = 40
-# Lamp patches link to every patch as elements, outside the clusters, while lamp patches x
-# patches stays below this (a lamp of thousands of faces is clustered like any surface).
-LAMP_PAIRS_MAX = 4_000_000
+# Lamp patches link to every patch as elements, outside the clusters, while there are at
+# most this many (area lights and small emissive meshes; a lamp of many faces, e.g. the
+# subdivided Cornell lamp of benchmarks/bench_scaling.py, is clustered like any surface: its
+# lamp x patch links cost more than they give there, 0.40 s -> 1.6 s at 144 x 2448).
+LAMP_PATCHES_MAX = 64
 # Shadow boundaries stop one level above the minimum element size (their links multiply fast).
 SHADOW_AREA_FACTOR = 4.0
 
@@ -323,7 +325,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             # all its leaves, which the direct light's shadows cannot afford, and the lamps'
             # links to every patch are few (lamp patches x patches) and refined as usual.
             is_lamp = scene.lamp >= 0
-            if is_lamp.sum() * scene.n_patches > LAMP_PAIRS_MAX or is_lamp.all():
+            if is_lamp.sum() > LAMP_PATCHES_MAX or is_lamp.all():
                 is_lamp = np.zeros_like(is_lamp)      # (a lamp of many faces: clustered too)
             tree = build_cluster_tree(scene.corners, np.flatnonzero(~is_lamp))
             cX, cY, cV, r0, s0 = link_clusters(

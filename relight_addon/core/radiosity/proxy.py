@@ -46,7 +46,7 @@ class Proxy:
     deviation: np.ndarray       # (P,) distance from each input patch's centroid to the proxy
     input_faces: int            # triangles given to the decimation
     normals: np.ndarray         # (P,) shading normals of the input faces (smooth_normals)
-    roughness: float            # RMS height of the faces over their neighbourhood's plane
+    roughness: float            # robust RMS height of the faces over their neighbourhood's plane
     back_of: np.ndarray         # the proxy triangles whose backs were appended (in order)
     seconds: float = 0.0
 
@@ -370,8 +370,8 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     np.add.at(acc, i, area[j, None] * normal[j])
     np.add.at(acc, j, area[i, None] * normal[i])
     smooth = acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
-    # Roughness: RMS height of the centroids over the plane of their neighbourhood (its mean
-    # point, the smoothed normal), area-weighted.
+    # Roughness: the height of the centroids over the plane of their neighbourhood (its mean
+    # point, the smoothed normal).
     mean = area[:, None] * centroid
     wsum = area.copy()
     np.add.at(mean, i, area[j, None] * centroid[j])
@@ -380,7 +380,9 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     np.add.at(wsum, j, area[i])
     mean /= np.maximum(wsum, 1e-300)[:, None]
     height = np.einsum("ij,ij->i", centroid - mean, smooth)
-    roughness = float(np.sqrt(area @ height ** 2 / max(area.sum(), 1e-300)))
+    # robust (1.4826 x the median absolute height): a neighbourhood that takes in a parallel
+    # surface nearby (a shelf over a table, a frame on a wall) is no bump of the surface
+    roughness = float(1.4826 * np.median(np.abs(height))) if len(height) else 0.0
     return smooth, roughness
 
 
