@@ -203,6 +203,8 @@ class LeafGather:
     source: np.ndarray     # source element id (a source leaf for ray-level entries)
     F: np.ndarray          # unoccluded, integrated over the leaf's own Gauss points
     FV: np.ndarray         # with visibility (sums of entries per leaf give its transport)
+    # (h.n,) bool: the leaves integrated on their m x m Gauss points (the others at their centre)
+    near: np.ndarray | None = None
 
 
 def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
@@ -359,4 +361,5 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         return F, V, vis
     gather = LeafGather(*(np.concatenate([getattr(p, k) for p in parts])
                           for k in ("leaf", "source", "F", "FV")))
+    gather.near = leaf_near
     return F, V, vis, gather

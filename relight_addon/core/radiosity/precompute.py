@@ -23,6 +23,7 @@ from ..lights import light_irradiance
 from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .conserve import COVERAGE_RAYS, conserve_rows, hemisphere_coverage
+from .exposure import leaf_exposure
 from .hierarchy import Hierarchy
 from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
                     visibility_types)
@@ -132,17 +133,22 @@ class _Timer(dict):
             self[name] = self.get(name, 0.0) + time.perf_counter() - t0
 
 
-def _lamp_emission(scene: SceneData, patch_of_leaf: np.ndarray, rho_leaf=None,
-                   light_occ=None) -> np.ndarray:
+def _lamp_emission(scene: SceneData, system: LeafSystem, light_occ=None) -> np.ndarray:
     """(L, 3, k): each lamp's emission on the leaves: its patches' exitance, and rho x the
-    direct irradiance of its light on every leaf (``light_occ`` (k, L, 3))."""
+    direct irradiance of its light on every leaf (``light_occ`` (k, L, 3)).  The part of a
+    lamp patch under a touching object emits into it (exposure.py): the sources that gather
+    from that patch's exposed part see (1 - a) E less than the exposed value counts."""
     k = scene.n_lamps
+    patch_of_leaf = system.patch
     E = np.zeros((len(patch_of_leaf), 3, k))
     lamp = scene.lamp[patch_of_leaf]
     hit = lamp >= 0
     E[np.flatnonzero(hit), :, lamp[hit]] = scene.emission[patch_of_leaf[hit]]
+    trapped = (1.0 - system.exposure)[:, None, None] * E
+    if trapped.any():
+        E = E - system.apply(trapped)
     if light_occ is not None:
-        E += np.moveaxis(light_occ, 0, 2) * np.asarray(rho_leaf)[:, :, None]
+        E += np.moveaxis(light_occ, 0, 2) * np.asarray(system.rho)[:, :, None]
     return E
 
 
@@ -434,13 +440,14 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
     with timer("conserve"):
         _conserve(h, system, gather, occluder, seed, scale, scene)
+        _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
         light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, occluder,
                                                     q.quadrature, q.rays,
                                                     int(rng.integers(2**31)), scale)
     report(0.9, "Solving per-lamp radiosity")
     with timer("solve"):
-        E = _lamp_emission(scene, system.patch, system.rho, light_occ)
+        E = _lamp_emission(scene, system, light_occ)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
     counts = {"rays": occluder.rays if occluder is not None else 0, "cluster_links": len(cX)}
@@ -471,6 +478,8 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
         system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
     _conserve(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
               solution.scene)
+    _expose(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
+            solution.scene, q)
     solution.system = system
     solution.light_occ, solution.light_unocc = lights_on_elements(
         solution.scene, h, system.leaves, ctx.get("occluder"), q.quadrature, q.rays,
@@ -490,6 +499,14 @@ def _conserve(h, system, gather, occluder, seed, scale, scene):
     conserve_rows(system, gather, front, back, COVERAGE_RAYS, scene.occluder, h.patch)
 
 
+def _expose(h, system, gather, occluder, seed, scale, scene, q):
+    """Leaves partly under a touching object are sources at their exposed part's radiosity
+    (exposure.py)."""
+    rng = np.random.default_rng([int(seed), 0xE905])      # its own stream: the rest is unchanged
+    system.set_exposure(h, leaf_exposure(h, system.leaves, gather.near, occluder, scene,
+                                         q.quadrature, rng, scale))
+
+
 def solve_basis(solution: RadiositySolution, rho_leaf=None, emission_scale=None):
     """Solve the per-lamp basis again on the current leaf system, with optional per-leaf
     reflectances and per-lamp exitance factors (links and form factors unchanged)."""
@@ -498,7 +515,7 @@ def solve_basis(solution: RadiositySolution, rho_leaf=None, emission_scale=None)
         system.rho = np.asarray(rho_leaf, float)
     scale = np.ones(solution.scene.n_lamps) if emission_scale is None else \
         np.asarray(emission_scale, float).copy()
-    E = _lamp_emission(solution.scene, system.patch, system.rho, solution.light_occ)
+    E = _lamp_emission(solution.scene, system, solution.light_occ)
     basis, info = system.solve(E * scale[None, None, :], solution.quality.solver,
                                tol=solution.quality.tol)
     solution.basis = np.moveaxis(basis, 2, 0)

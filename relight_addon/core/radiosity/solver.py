@@ -58,6 +58,7 @@ class LeafSystem:
         self.M = sp.csr_matrix((transport, (slot[leaf_ids], source)), shape=(L, n))
         self.rho = rho_patch[self.patch]                    # (L, 3)
         self.U = self.W = None                              # cluster links: H += U (W B)
+        self.exposure = np.ones(L)                          # see set_exposure
 
     @classmethod
     def from_links(cls, h: Hierarchy, receiver, source, transport, rho_patch):
@@ -67,6 +68,16 @@ class LeafSystem:
         G = sp.csr_matrix((transport, (receiver, source)), shape=(h.n, h.n))
         M = (P_down @ G).tocoo()
         return cls(h, leaves[M.row], M.col, M.data, rho_patch)
+
+    def set_exposure(self, h: Hierarchy, exposure):
+        """Sources at the radiosity of their exposed part (radiosity.exposure): an element's
+        value is its leaves' power over their exposed area, a leaf's B / a."""
+        self.exposure = np.asarray(exposure, float)
+        pos, anc = h.ancestor_pairs(self.leaves)
+        exposed = np.bincount(anc, self.leaf_area[pos] * self.exposure[pos], h.n)
+        self.P_up = sp.csr_matrix((self.leaf_area[pos] / np.maximum(exposed[anc], 1e-300),
+                                   (anc, pos)), shape=(h.n, len(self.leaves)))
+        return self
 
     def add_clusters(self, U, W):
         """Add the low-rank transport of cluster links (see clusters.cluster_operator)."""

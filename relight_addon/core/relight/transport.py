@@ -27,6 +27,9 @@ class Transport:
         lamp_src = sol.scene.lamp[h.patch[g.source]] >= 0
         self.dir_occ = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.FV[lamp_src], rho)
         self.dir_unocc = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.F[lamp_src], rho)
+        # every system reads its sources as the solution's does (exposed parts: exposure.py)
+        for system in (self.unocc, self.dir_occ, self.dir_unocc):
+            system.P_up, system.exposure = sol.system.P_up, sol.system.exposure
         self.light_occ = self.light_unocc = 0.0
         if sol.light_occ is not None:
             s = np.ones(sol.scene.n_lamps) if sol.emission_scale is None else sol.emission_scale
