@@ -109,7 +109,14 @@ def diagnose(result, use_patch, group_names=str) -> list:
                    f"{100 * share:.0f} % of it (a lamp missing from the scene or set too weak, "
                    "or an overexposed photo): its relit light there is too dark")
     est = result.lamps
-    seen = np.flatnonzero(np.isfinite(est.photo_ratio) & np.isfinite(est.uncertainty))
+    gap = [lamp_clearance(scene, k) for k in range(len(names))]
+    peak = [max((float(luminance(m[k]).max()) for m in result.maps.values()), default=0.0)
+            for k in range(len(names))]
+    # a lamp touching a surface or lighting nothing is named below; the photo's view of the
+    # others is not judged against its estimate (one lamp 1 mm under the ceiling made the
+    # other look 'off' at draft)
+    sound = np.array([g >= TOUCHING and p > 1e-9 for g, p in zip(gap, peak)], bool)
+    seen = np.flatnonzero(np.isfinite(est.photo_ratio) & np.isfinite(est.uncertainty) & sound)
     log_t = np.log(np.maximum(est.photo_ratio[seen], 1e-300))
     for j, k in enumerate(seen):
         others = np.delete(log_t, j)
@@ -125,8 +132,7 @@ def diagnose(result, use_patch, group_names=str) -> list:
             out.append(f"The photo suggests lamp '{names[k]}' at {r:.2f} x its set power "
                        f"relative to {versus} (+- {100 * s:.0f} %): check its power; {used}")
     for k in range(len(names)):
-        peak = max((float(luminance(m[k]).max()) for m in result.maps.values()), default=0.0)
-        if peak <= 1e-9:
+        if peak[k] <= 1e-9:
             out.append(f"Lamp '{names[k]}' lights none of the photographed surfaces (is it "
                        "inside or behind something?): switching it on will change nothing")
     info = getattr(sol, "info", None)
@@ -135,9 +141,9 @@ def diagnose(result, use_patch, group_names=str) -> list:
                    f"residual {info.residual:.1e}): the interreflections may be wrong (look for "
                    "surfaces that overlap or reflect almost all light)")
     for k in range(len(names)):
-        gap = lamp_clearance(scene, k)
-        if gap < TOUCHING:
-            where = "inside or touching a surface" if gap <= 0 else f"{1000 * gap:.0f} mm from a surface"
+        if gap[k] < TOUCHING:
+            where = ("inside or touching a surface" if gap[k] <= 0
+                     else f"{1000 * gap[k]:.0f} mm from a surface")
             out.append(f"Lamp '{names[k]}' is {where}: the light right next to it is not "
                        "resolved (move it away a little, or make it smaller)")
     return out
