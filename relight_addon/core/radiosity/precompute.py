@@ -24,6 +24,7 @@ from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .conserve import COVERAGE_RAYS, conserve_rows, hemisphere_coverage
 from .exposure import leaf_exposure
+from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
                     visibility_types)
@@ -434,6 +435,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         F, V, vis, gather = final_form_factors(h, kept.receiver, kept.source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,
                                                timer=timer)
+        split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     links = LinkSet(kept.receiver, kept.source, F, V, vis)
 
     with timer("lights"):
@@ -470,6 +472,7 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     F, V, vis, gather = final_form_factors(h, links.receiver, links.source, ctx.get("occluder"),
                                            q.quadrature, q.rays, rng, ctx.get("scale", 1.0),
                                            with_leaves=True)
+    split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
     solution.gather = gather
     system = LeafSystem(h, gather.leaf, gather.source, gather.FV, solution.scene.rho)

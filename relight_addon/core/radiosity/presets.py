@@ -17,11 +17,22 @@ class Quality:
     min_area: float        # smallest element, as a fraction of the total area
     quadrature: int        # m x m Gauss points per leaf for the final form factors
     rays: int              # visibility rays per final link (at least one per sample point)
-    oracle_rays: int       # visibility rays per candidate link during refinement
+    # visibility rays per candidate link during refinement.  Medium: 8 (was 4) made family
+    # room 6's former shadows stable over seeds (0.44-0.48 CIEDE2000; 0.47-0.62 with 4: a
+    # spot's bright pool on a wall lit the floor in blotches on seed 0)
+    oracle_rays: int
     confirm_rays: int = 0  # x oracle_rays: re-test of bright links the oracle's rays all agreed on
     passes: int = 3        # refine / solve passes (the BF oracle needs a radiosity estimate)
     separation: float = 0.4  # cluster link when (radius sum) < separation * (centre distance)
     cluster_above: int = 400  # input patch count above which patches are clustered
+    # gather entries of near sources split over the source's children by form factor this
+    # many levels down (radiosity.source_split), while source radius > split_near x distance.
+    # Cornell box, seeds 0-4 (benchmarks/results/cornell.md): medium 3 levels at 0.15 mean
+    # 0.6-1.1 % (none: 1.2-1.5 %) for +0.7 s; high needs 32 rays a link to gain as much (one
+    # block face sees a wall mostly hidden behind the other block).  Draft keeps none: on the
+    # suite's room of random photos it sent the lamp fit's rho^ from 0.5 to 0.29
+    split_levels: int = 0
+    split_near: float = 0.3
     solver: str = "gmres"
     tol: float = 1e-8
     # the shadow-edge fit's bias floor (log-ratio sigma) before the photo overrides a lamp's set
@@ -46,12 +57,14 @@ PRESETS = {
                      oracle_rays=4, passes=2, separation=0.4, exitance_bias=0.10,
                      proxy_faces=1000),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
-                      rays=8, oracle_rays=4, passes=2, separation=0.3, confirm_rays=4,
-                      proxy_faces=1500),
-    "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=16,
-                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=1500),
+                      rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
+                      proxy_faces=1500, split_levels=3, split_near=0.15),
+    "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
+                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=1500,
+                    split_levels=3, split_near=0.15),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=1500),
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=1500,
+                     split_levels=3, split_near=0.1),
 }
 
 
