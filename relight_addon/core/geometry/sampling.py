@@ -96,3 +96,14 @@ def random_points(corners: np.ndarray, k: int, rng: np.random.Generator) -> np.n
     xu, xv = stratified_unit_square(len(corners), k, rng)
     u, v = area_uniform_uv(corners, xu, xv)
     return bilinear_point(corners[:, None], u, v)
+
+
+def cosine_directions(normals: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """Cosine-distributed unit directions around ``normals`` (..., 3) from uniform numbers
+    ``x1``, ``x2`` (..., 1) in [0, 1), all three broadcast together."""
+    axis = np.where(np.abs(normals[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    r, phi = np.sqrt(x1), 2.0 * np.pi * x2
+    return r * np.cos(phi) * t1 + r * np.sin(phi) * t2 + np.sqrt(np.maximum(1.0 - x1, 0.0)) * normals

@@ -27,6 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..geometry.raycast import ray_offset
+from ..geometry.sampling import cosine_directions
 
 COVERAGE_RAYS = 64      # per leaf
 MAX_GAIN = 4.0          # at most this factor on a leaf's estimated entries
@@ -48,11 +49,6 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale):
     source = (scene.rho.max(axis=1) > 0) | (scene.emission.max(axis=1) > 0)
     c = h.corners[leaves]
     n = h.normal[leaves]
-    # a tangent frame per leaf
-    axis = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(n, axis)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(n, t1)
     eps = ray_offset(scale)
     chunk = max(1, (1 << 20) // rays)
     for a in range(0, L, chunk):
@@ -61,9 +57,7 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale):
         cc = c[a:b, None]
         P = (cc[..., 0, :] + u * (cc[..., 1, :] - cc[..., 0, :]) + v * (cc[..., 3, :] - cc[..., 0, :])
              + u * v * (cc[..., 0, :] - cc[..., 1, :] + cc[..., 2, :] - cc[..., 3, :]))
-        r, phi = np.sqrt(x1), 2.0 * np.pi * x2
-        D = (r * np.cos(phi) * t1[a:b, None] + r * np.sin(phi) * t2[a:b, None]
-             + np.sqrt(np.maximum(1.0 - x1, 0.0)) * n[a:b, None])
+        D = cosine_directions(n[a:b, None], x1, x2)
         O = P + eps * n[a:b, None]
         t, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
         hit = prim >= 0

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.raycast import ray_offset
-from ..geometry.sampling import quadrature
+from ..geometry.sampling import cosine_directions, quadrature
 
 BURIED_RAYS = 8         # per quadrature point
 
@@ -47,10 +47,6 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     pts, w = quadrature(h.corners[leaves[test]], m)            # (t, m*m, 3), (t, m*m)
     _, patch_normal = scene.area_normal()
     n = h.normal[leaves[test]]
-    axis = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(n, axis)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(n, t1)
     eps = ray_offset(scale)
     mm, R = pts.shape[1], BURIED_RAYS
     buried = np.zeros((len(test), mm), bool)
@@ -58,9 +54,8 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     for c0 in range(0, len(test), chunk):
         c1 = min(c0 + chunk, len(test))
         x1, x2 = rng.random((2, c1 - c0, mm, R, 1))
-        r, phi = np.sqrt(x1), 2.0 * np.pi * x2
-        nn, a1, a2 = (v[c0:c1, None, None] for v in (n, t1, t2))
-        D = (r * np.cos(phi) * a1 + r * np.sin(phi) * a2 + np.sqrt(np.maximum(1.0 - x1, 0.0)) * nn)
+        nn = n[c0:c1, None, None]
+        D = cosine_directions(nn, x1, x2)
         O = np.broadcast_to(pts[c0:c1, :, None] + eps * nn, D.shape)
         _, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
         hit = prim >= 0

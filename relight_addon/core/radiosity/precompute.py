@@ -442,6 +442,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
     with timer("conserve"):
         _conserve(h, system, gather, occluder, seed, scale, scene)
+    with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
         light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, occluder,
