@@ -15,6 +15,7 @@ another through ``bpy.ops``):
   While a solve runs, neither operator can start another (their poll says why).
 """
 
+import dataclasses
 import threading
 import time
 
@@ -243,11 +244,16 @@ class _PrecomputeRunner(RelightOperator):
             read_report.warn(sentence)
         warnings = list(read_report.warnings)          # write_results appended its own
         virtual = virtual_indices(read_report)
+        room = data.without_virtual()
         real = data.without_lamps(virtual)
+        objects = bool(data.virtual.any())
+        kept = getattr(solution, "room", None) is not None or not objects
         store_status(scene, solution, time.perf_counter() - self._t0, correction,
                      remember(scene, solution), warnings, scene_fingerprint(data),
-                     scene_fingerprint(real, textures=False), scene_fingerprint(real),
-                     [data.lamp_names[k] for k in virtual])
+                     scene_fingerprint(real, textures=False),
+                     scene_fingerprint(room.without_lamps(virtual)),
+                     [data.lamp_names[k] for k in virtual],
+                     scene_fingerprint(room) if kept else "", objects)
         settings = getattr(scene, "relight", None)
         if settings is not None:
             update_overlay(settings, context)
@@ -386,28 +392,54 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
                     self.report({'INFO'}, "Relight: up to date (nothing changed since the last "
                                           "precompute)")
                 return {'FINISHED'}
+            quick = self._room_kept(context, data, report, st, correction)
+            if quick is not None:
+                return quick
             virtual = virtual_indices(report)
-            real = data.without_lamps(virtual)
-            last = last_result(scene)
-            if last is not None and last.denominator is not None and \
-                    st.get("real") == scene_fingerprint(real):
-                return self._virtual_lamps_only(context, data, report, last, virtual, correction)
-            if st.get("geometry") == scene_fingerprint(real, False):
+            if st.get("geometry") == scene_fingerprint(data.without_lamps(virtual), False):
                 reuse = reusable_solution(scene, preset, correction)
         run = self._solve_modal if modal else self._solve_now
         return run(context, *read, preset, correction, reuse)
 
-    def _virtual_lamps_only(self, context, data, report, last, virtual, correction):
-        """Only virtual lamps were added, moved or changed: keep the real lamps' result and
-        compute the virtual lamps' maps on it (no new solve of the room)."""
-        import dataclasses
+    def _room_kept(self, context, data, report, st, correction):
+        """Without a new solve of the room when only virtual lamps or virtual objects were
+        added, moved, changed or deleted: the last result of the room (without its objects)
+        keeps the real lamps' maps, the virtual lamps' maps are made on it again if they
+        changed, then the objects' change is added (virtual.py).  None: a new solve is needed."""
+        from ..relight_addon.core.relight.virtual import add_lamps, add_objects, keep_lamps
+        from ..relight_addon.core.scene import scene_fingerprint
+        last = last_result(context.scene)
+        if last is None or last.denominator is None:
+            return None
+        base = last.room if last.room is not None else (None if st.get("objects") else last)
+        if base is None:
+            return None
+        virtual = virtual_indices(report)
+        room = data.without_virtual()
+        try:
+            if st.get("room") and st.get("room") == scene_fingerprint(room):
+                result = base
+            elif st.get("real") == scene_fingerprint(room.without_lamps(virtual)):
+                result = self._virtual_lamps(context, data, base, virtual, add_lamps, keep_lamps)
+            else:
+                return None
+            if data.virtual.any():
+                result = add_objects(result, data)
+            elif result.room is not None:
+                result = dataclasses.replace(result, room=None)
+        except Exception as ex:
+            self.report({'ERROR'}, f"Relight update failed: {user_message(ex)}")
+            return {'CANCELLED'}
+        return self._finish(context, data, report, result, correction)
 
+    @staticmethod
+    def _virtual_lamps(context, data, base, virtual, add_lamps, keep_lamps):
+        """``base`` (the room's result) with its virtual lamps' maps made again for the virtual
+        lamps of ``data`` (no new solve of the room)."""
         import numpy as np
-
-        from ..relight_addon.core.relight.virtual import add_lamps, keep_lamps
         st = status(context.scene)
-        names = list(last.solution.scene.lamp_names)
-        base = keep_lamps(last, [names.index(n) for n in st.get("virtual", ()) if n in names])
+        names = list(base.solution.scene.lamp_names)
+        base = keep_lamps(base, [names.index(n) for n in st.get("virtual", ()) if n in names])
         lights = data.lights
         rows = [np.flatnonzero(lights.lamp == k) for k in virtual]
         rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
@@ -415,12 +447,7 @@ class RELIGHT_OT_update(_PrecomputeRunner, bpy.types.Operator):
         sub = dataclasses.replace(lights, **{f.name: getattr(lights, f.name)[rows]
                                              for f in dataclasses.fields(lights)})
         sub.lamp = np.array([order[int(k)] for k in sub.lamp], np.int32)
-        try:
-            result = add_lamps(base, sub, [data.lamp_names[k] for k in virtual])
-        except Exception as ex:
-            self.report({'ERROR'}, f"Relight update failed: {user_message(ex)}")
-            return {'CANCELLED'}
-        return self._finish(context, data, report, result, correction)
+        return add_lamps(base, sub, [data.lamp_names[k] for k in virtual])
 
 
 class RELIGHT_OT_restore_originals(RelightOperator, bpy.types.Operator):

@@ -154,7 +154,7 @@ def status(scene):
 
 
 def store_status(scene, result, seconds, correction, run, warnings, fingerprint="",
-                 geometry="", real="", virtual=()):
+                 geometry="", real="", virtual=(), room="", objects=False):
     """Write what the panel shows: counts, time, model misfit, lamps and their exitances, the
     read and write warnings, and the scene fingerprint that Update compares."""
     import math
@@ -183,9 +183,13 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
         "proxy_deviation": finite(float(stats.get("proxy_deviation", 0.0)), 0.0),
         "warnings": [str(w) for w in warnings],
         "fingerprint": fingerprint, "geometry": geometry,
-        # the scene without its virtual lamps (what the real lamps' maps depend on), and the
-        # virtual lamps (lights added after the first precompute: not in the photo)
+        # the room (the scene without its virtual objects) without its virtual lamps (what the
+        # real lamps' maps depend on), and the virtual lamps (lights added after the first
+        # precompute: not in the photo)
         "real": real, "virtual": list(virtual),
+        # the room with its virtual lamps, whose result an Update that only changes virtual
+        # objects starts from ("" when it is not kept), and whether there are such objects
+        "room": room, "objects": bool(objects),
     }
 
 

@@ -71,3 +71,60 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
     assert bpy.ops.relight.update() == {"FINISHED"}
     back = de(_relit(info))
     assert abs(back[shadow].mean() - d_without[shadow].mean()) < 0.25 * d_without[shadow].mean()
+
+
+def _images(info):
+    """The relit materials' map images of the office's surfaces, as float arrays by name."""
+    out = {}
+    for name in info.objects:
+        for slot in bpy.data.objects[name].material_slots:
+            for node in slot.material.node_tree.nodes:
+                image = getattr(node, "image", None)
+                if image is not None and ".relight." in image.name:
+                    px = np.empty(len(image.pixels), np.float32)
+                    image.pixels.foreach_get(px)
+                    out[image.name] = px
+    return out
+
+
+def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(monkeypatch):
+    """Update inserts, moves and deletes a virtual object without solving the room again (the
+    last result of the room alone is kept); what it writes is what a Precompute from scratch
+    writes for the same scene, and deleting the object gives the room's maps back exactly."""
+    import importlib
+    info, *_ = photographed_office(lambda info, power: None)
+    assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
+    room = _images(info)
+    assert room
+    ops = importlib.import_module("relight_ext.operators.precompute")
+    solves = []
+    solve = ops.run_precompute
+    monkeypatch.setattr(ops, "run_precompute", lambda *a, **k: solves.append(1) or solve(*a, **k))
+
+    box = _grey_box((2.7, 3.2, 0.3))
+    box.relight_role = "virtual"
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    first = _images(info)
+    changed = [n for n in room if not np.array_equal(room[n], first[n])]
+    assert changed, "the box changed no map"
+    box.location.x += 0.4
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    moved = _images(info)
+    assert solves == [], "Update solved the room again for a virtual object"
+    assert any(not np.array_equal(first[n], moved[n]) for n in changed)
+
+    assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}      # from scratch
+    scratch = _images(info)
+    assert solves == [1]
+    for n in room:
+        assert np.allclose(moved[n], scratch[n], rtol=1e-4, atol=1e-6), n
+
+    bpy.data.objects.remove(box)
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert solves == [1]
+    gone = _images(info)
+    for n in room:
+        assert np.array_equal(gone[n], room[n]), n

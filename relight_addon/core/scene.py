@@ -334,7 +334,10 @@ def scene_fingerprint(data: SceneData, textures: bool = True) -> str:
         peak = emission[sel].max() if sel.any() else 0.0
         if peak > 0:
             colour[sel] = emission[sel] / peak
-    arrays = [data.corners, colour, data.lamp, data.occluder, data.group, data.virtual,
+    # groups as a partition (numbered by first patch): objects read in between renumber them
+    _, first, inverse = np.unique(data.group, return_index=True, return_inverse=True)
+    group = np.argsort(np.argsort(first))[inverse.ravel()]
+    arrays = [data.corners, colour, data.lamp, data.occluder, group, data.virtual,
               *data.lights.fingerprint_arrays()]
     if textures:
         arrays += [data.rho] + [a for a in (data.uv, data.image) if a is not None]

@@ -63,14 +63,21 @@ def _angle(a, b):
 def may_be_shadowed(scene, texel_map, triangles, margin=1.25):
     """(T,) bool, conservative: texels where some lamp's bounding sphere, seen from the texel
     (grown by its footprint), can be hidden by the bounding sphere of ``triangles``."""
-    tri = np.asarray(triangles, float).reshape(-1, 3)
-    c = 0.5 * (tri.min(0) + tri.max(0))
     x, _ = texel_points(scene, texel_map)
     # a texel's footprint: the patch's area shared by its texels
     patch = texel_map.patch
     area = scene.area_normal()[0]
     per = np.bincount(patch, minlength=len(area))
     foot = np.sqrt(area[patch] / np.maximum(per[patch], 1))
+    return may_be_shadowed_at(scene, x, foot, triangles, margin)
+
+
+def may_be_shadowed_at(scene, x, foot, triangles, margin=1.25):
+    """(n,) bool, conservative: points ``x`` (n, 3) with a footprint of radius ``foot`` (n,)
+    where some lamp of ``scene``, seen from the point, can be hidden by the bounding sphere of
+    ``triangles``."""
+    tri = np.asarray(triangles, float).reshape(-1, 3)
+    c = 0.5 * (tri.min(0) + tri.max(0))
     R = margin * float(np.linalg.norm(tri - c, axis=1).max()) + foot
     to_c = c - x
     d_c = np.linalg.norm(to_c, axis=1)
@@ -87,7 +94,8 @@ def may_be_shadowed(scene, texel_map, triangles, margin=1.25):
     return out
 
 
-def _subset(texel_map, mask):
+def texel_subset(texel_map, mask):
+    """The texels of ``texel_map`` where ``mask`` (T,) holds, in the same order."""
     images, start = [], 0
     for im in texel_map.images:
         m = mask[start:start + len(im)]
@@ -110,7 +118,7 @@ def object_visibility(scene, texel_map, triangles, rays=RAYS, samples=SAMPLES,
     if not mask.any():
         return V
     occluder = make_occluder(np.asarray(triangles, float))
-    U, O = TexelLight(scene, _subset(texel_map, mask), occluder, rays, samples, seed).direct()
+    U, O = TexelLight(scene, texel_subset(texel_map, mask), occluder, rays, samples, seed).direct()
     u, o = U @ LUMINANCE, O @ LUMINANCE
     lit = u > UNLIT * max(float(u.max(initial=0.0)), 1e-300)
     sub = np.ones(u.shape)

@@ -102,6 +102,9 @@ class ShadowFreeResult:
     # texel map in the solution's patches (``texel_map`` itself unless a proxy was used)
     scene: SceneData | None = None
     solution_texels: object = None
+    # with virtual objects: the result of the room alone, that an Update moving, adding or
+    # deleting objects starts from again (None when this result is not its room plus objects)
+    room: object = None
 
     def texel_light(self, scene=None, seed=0, occluder=None) -> TexelLight:
         """A TexelLight on this result's texels as the run had it (shading normals, ray

@@ -13,10 +13,9 @@ light the room with its interreflections and are shadowed by its geometry.
 
 Virtual objects.  The photo shows the room without them, so the shadow-free texture and the
 irradiance the photo was lit by come from the room alone; what they change is each lamp's light
-on the room: their shadows, and the light they reflect.  ``add_objects`` solves the room with
-them and without them on the same terms (patch reflectances, the same preset and seeds) and
-multiplies every map by the ratio of the two, per lamp and texel, so that the discretisation
-cancels and the maps are untouched away from the objects.
+on the room: their shadows, and the light they block and reflect.  ``add_objects`` adds that
+change (object_change.py: cast only where the objects can reach, on the room's own solution) to
+every map; away from the objects the maps are untouched.
 """
 from __future__ import annotations
 
@@ -115,7 +114,8 @@ def add_lamps(result, lights: Lights, names, seed=0):
         uncertainty=np.concatenate([est.uncertainty, np.full(m, np.nan)]),
         applied=np.concatenate([est.applied, np.zeros(m, bool)]),
         equal=np.concatenate([est.equal, np.ones(m)]), nnls=np.concatenate([est.nnls, np.zeros(m)]))
-    return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol, direct=direct)
+    return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol, direct=direct,
+                               room=None)
 
 
 def keep_lamps(result, drop):
@@ -137,72 +137,39 @@ def keep_lamps(result, drop):
         "scale", "photo_ratio", "uncertainty", "applied", "equal", "nnls")})
     direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
-                               lamps=lamps, solution=new_sol, direct=direct)
+                               lamps=lamps, solution=new_sol, direct=direct, room=None)
 
 
 def add_objects(result, scene, progress=None):
     """A copy of ``result`` (the precompute of ``scene`` without its virtual objects, per
-    texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``)."""
-    from ..radiosity.precompute import solve_basis, solve_radiosity
-    from .maps import FACTOR_MAX
+    texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``): each lamp's
+    irradiance changes by what object_change.py casts where the objects can reach, over the
+    irradiance the photo was lit by.  ``room`` of the copy is ``result``, which an Update that
+    only moves, adds or deletes objects starts from again."""
+    from .maps import DISPLAY_EPS
+    from .object_change import VirtualObjects, irradiance_change
+    from .shadowfree import _texel_light
     if result.denominator is None:
         raise ValueError("virtual objects are added to a per-texel result only")
-    base = result.solution.scene                 # the room as precomputed (oriented, backs)
     objects = scene.virtual_last()
     extra = slice(int((~objects.virtual).sum()), objects.n_patches)
     if extra.start == extra.stop:
-        return result
-    # The room's patch reflectances (the mean of its leaves' estimates), then the objects'.
-    sol = result.solution
-    rho = base.rho.copy()
-    a = sol.system.leaf_area
-    for c in range(3):
-        num = np.bincount(sol.system.patch, a * sol.system.rho[:, c], base.n_patches)
-        den = np.bincount(sol.system.patch, a, base.n_patches)
-        rho[:, c] = np.where(den > 0, num / np.maximum(den, 1e-300), rho[:, c])
-    room = base.with_rho(rho)
-    # Solved without and with the objects; on a scan, the room solved is its proxy and the
-    # texels' direct light is cast on the full mesh (with the objects too).
-    pairs = [(room, room), (_with_objects(room, objects, extra), None)]
-    if sol.context.get("proxy") is not None:
-        full = result.scene
-        pairs = [(room, full), (pairs[1][0], _with_objects(full, objects, extra))]
+        return dataclasses.replace(result, room=None)
     opt = result.options
-    scale = result.exitance_scale
-    tm = result.texel_map
-    H = []
-    for solved, lit in pairs:
-        occ = solved.make_occluder()
-        s = solve_radiosity(solved, opt.preset, occluder=occ, seed=opt.seed)
-        solve_basis(s, solved.rho[s.system.patch], scale)
-        lit = solved if lit is None else lit
-        light = result.texel_light(lit, opt.seed + 202,
-                                   occluder=occ if lit is solved else lit.make_occluder())
-        H.append(light.irradiance(s, scale)[0])                                 # (k, T, 3)
-    without, with_ = H
-    ratio = np.where(without > 0, with_ / np.where(without > 0, without, 1.0), 1.0)
-    ratio = np.clip(ratio, 0.0, FACTOR_MAX)
-    new_maps, _ = map_images(tm, _texel_maps(result) * ratio)
-    return dataclasses.replace(result, maps=new_maps)
+    proxy = result.solution.context.get("proxy")
+    texel_scene = result.scene if result.scene is not None else result.solution.scene
 
-
-def _with_objects(room, objects, extra):
-    """``room`` (a SceneData) with the patches ``extra`` of ``objects`` appended: they take no
-    texels of the photos."""
-    from ..scene import SceneData
-    combined = object.__new__(SceneData)
-    combined.__dict__.update(room.__dict__)
-    n_extra = extra.stop - extra.start
-    for name in room._per_patch_arrays():
-        add = getattr(objects, name)
-        if name == "image":
-            add = np.full(n_extra, -1)
-        elif add is None:                    # uv of a scene without UVs
-            add = np.zeros((n_extra, 4, 2))
-        else:
-            add = add[extra]
-        setattr(combined, name, np.concatenate([getattr(room, name), add]))
-    return combined
+    def make_light(tm, occluder, seed):
+        return _texel_light(texel_scene, tm, occluder, opt, seed, proxy,
+                            result.solution_texels if tm is result.texel_map else None)
+    delta = irradiance_change(result, VirtualObjects.of(objects, extra), make_light,
+                              opt.seed + 202)
+    D = np.maximum(np.asarray(result.denominator, float), 0.0)                   # (T, 3)
+    lit = D >= np.maximum(DISPLAY_EPS * D.max(axis=0, initial=0.0), 1e-300)
+    old = _texel_maps(result)
+    new = np.where(lit[None], np.maximum(old + delta / np.where(lit, D, 1.0)[None], 0.0), old)
+    new_maps, _ = map_images(result.texel_map, new)
+    return dataclasses.replace(result, maps=new_maps, room=result)
 
 
 def _texel_maps(result):

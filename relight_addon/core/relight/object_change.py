@@ -1,0 +1,318 @@
+"""What virtual objects change in a solved room, computed only where they can change it.
+
+Seed 000 §4.4.2 inserts an object by dynamic hierarchical radiosity: only the links whose shaft
+meets the object are tested again.  Here the room's solution is kept whole and each lamp's
+irradiance gains the object's change, cast only in the directions and at the places the object
+can reach:
+
+* direct light per texel: the texels whose view of a lamp can meet an object's bounding sphere
+  (``settled.may_be_shadowed``) are cast past the room and the objects, with the same rays as
+  past the room alone; the difference is the object's shadow;
+* indirect light per leaf: rays from the leaf into each object's bounding cone (the only
+  directions in which its view changes) replace, where they meet the object first, the room's
+  solved radiosity behind it by the object's own.  The object's radiosity is one gather: the
+  lamps' direct light on it and the room's radiosity seen by cosine rays (and a second bounce
+  between objects);
+* lamps that are not patches are cast again on the leaves that can be in an object's shadow;
+* that change of every leaf's irradiance, times its reflectance, propagates through the room's
+  own transport (one solve per lamp), and is read at the texels as the indirect light is.
+
+The maps gain (direct change + indirect change) / D, D the irradiance the photo was lit by, so
+they are untouched where the objects change nothing.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.raycast import make_occluder, ray_offset
+from ..geometry.sampling import cosine_directions, quadrature, random_points, \
+    stratified_unit_square
+from ..lights import light_irradiance
+from ..radiosity.precompute import lights_on_elements
+from ..texture.mapping import inverse_bilinear, inverse_triangle
+from .settled import may_be_shadowed, may_be_shadowed_at, texel_subset
+from .transport import Transport
+
+CONE_RAYS = 64          # per leaf and object, into the object's bounding cone
+FACE_RAYS = 128         # per object face, gathering the room's radiosity
+MIN_SOLID_ANGLE = 1e-3  # sr: an object seen smaller than this from a leaf changes nothing there
+OBJECT_BOUNCES = 2      # gathers of the objects' radiosity (the second adds object to object)
+
+
+class EitherOccluder:
+    """Segments blocked by the room (may be None) or by the objects."""
+
+    def __init__(self, room, objects):
+        self.room, self.objects = room, objects
+
+    def segments_occluded(self, origins, ends, *args, **kwargs):
+        out = np.asarray(self.objects.segments_occluded(origins, ends), bool).copy()
+        free = np.flatnonzero(~out)
+        if self.room is not None and len(free):
+            out[free] = self.room.segments_occluded(np.asarray(origins)[free],
+                                                    np.asarray(ends)[free])
+        return out
+
+
+@dataclass
+class VirtualObjects:
+    """The virtual objects' faces (their patches of a scene, in order) and bounding spheres."""
+    corners: np.ndarray      # (n, 4, 3)
+    normal: np.ndarray       # (n, 3)
+    rho: np.ndarray          # (n, 3)
+    owner: np.ndarray        # (n,) object index of each face
+    centre: np.ndarray       # (m, 3)
+    radius: np.ndarray       # (m,)
+    triangles: np.ndarray    # (t, 3, 3)
+    occluder: object         # ray caster of the triangles; patch_of_triangle: face index
+
+    @staticmethod
+    def of(scene, extra: slice) -> "VirtualObjects":
+        ids = np.arange(extra.start, extra.stop)
+        _, normal = scene.area_normal()
+        tris, patches = scene.occluder_triangles(with_patches=True)
+        keep = (patches >= extra.start) & (patches < extra.stop)
+        tris, faces = tris[keep], patches[keep] - extra.start
+        groups, owner = np.unique(scene.group[ids], return_inverse=True)
+        centre = np.zeros((len(groups), 3))
+        radius = np.zeros(len(groups))
+        for o in range(len(groups)):
+            pts = scene.corners[ids[owner == o]].reshape(-1, 3)
+            centre[o] = 0.5 * (pts.min(0) + pts.max(0))
+            radius[o] = np.linalg.norm(pts - centre[o], axis=1).max()
+        occluder = make_occluder(tris)
+        occluder.patch_of_triangle = faces
+        return VirtualObjects(scene.corners[ids], normal[ids], scene.rho[ids], owner, centre,
+                              radius, tris, occluder)
+
+
+def _leaf_lookup(sol):
+    """Hit point on a patch of the solution -> index of the leaf there (in ``sol.leaves``)."""
+    h = sol.hierarchy
+    slot = np.full(h.n, -1, np.int64)
+    slot[sol.leaves] = np.arange(len(sol.leaves))
+    corners = sol.scene.corners
+
+    def lookup(patch, x):
+        c = corners[patch]
+        n = h.normal[patch]
+        e1 = c[:, 1] - c[:, 0]
+        e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
+        e2 = np.cross(n, e1)
+        rel = c - c[:, :1]
+        c2 = np.stack([np.einsum("nij,nj->ni", rel, e1), np.einsum("nij,nj->ni", rel, e2)], -1)
+        q = x - c[:, 0]
+        q2 = np.stack([np.einsum("ij,ij->i", q, e1), np.einsum("ij,ij->i", q, e2)], -1)
+        tri = np.all(c[:, 2] == c[:, 3], axis=-1)
+        u = np.full(len(patch), 0.5)
+        v = np.full(len(patch), 0.5)
+        if (~tri).any():
+            u[~tri], v[~tri], _ = inverse_bilinear(c2[~tri], q2[~tri])
+        if tri.any():
+            u[tri], v[tri] = inverse_triangle(c2[tri], q2[tri])[:2]
+        u = np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)
+        v = np.clip(np.nan_to_num(v, nan=0.5), 0.0, 1.0)
+        return slot[h.locate(patch, u, v)]
+    return lookup
+
+
+def _room_radiosity_along(sol, room, lookup, origins, directions):
+    """(k, n, 3) solved room radiosity first met along each ray (0 where none), the distance to
+    it, and whether it is a lamp patch."""
+    k = len(sol.basis)
+    t, prim = room.first_hit(origins, directions) if room is not None else \
+        (np.full(len(origins), np.inf), np.full(len(origins), -1))
+    B = np.zeros((k, len(origins), 3))
+    lamp = np.zeros(len(origins), bool)
+    hit = np.flatnonzero(prim >= 0)
+    if len(hit):
+        patch = room.patch_of_triangle[prim[hit]]
+        leaf = lookup(patch, origins[hit] + t[hit, None] * directions[hit])
+        B[:, hit] = sol.basis[:, leaf]
+        lamp[hit] = sol.scene.lamp[patch] >= 0
+    return B, t, lamp
+
+
+def object_radiosity(objects: VirtualObjects, sol, room, lookup, scale, rays, seed):
+    """(k, n, 3) radiosity of every object face per lamp: its reflectance times the lamps'
+    direct light on it (``sol.scene.lights``) and the room's solved radiosity it sees (lamp
+    patches included), with ``OBJECT_BOUNCES`` gathers between the objects."""
+    k = len(sol.basis)
+    n = len(objects.corners)
+    rng = np.random.default_rng([int(seed), 0x0B1])
+    s = np.ones(k) if sol.emission_scale is None else np.asarray(sol.emission_scale, float)
+    offset = ray_offset(scale)
+    pts, _ = quadrature(objects.corners, 2)                                   # (n, 4, 3)
+    H = np.zeros((k, n, 3))
+    lights = sol.scene.lights
+    if len(lights):
+        _, O = light_irradiance(lights, pts, objects.normal, EitherOccluder(room, objects.occluder),
+                                rays, int(rng.integers(2**31)), scale, offset)
+        for i, lamp in enumerate(lights.lamp):
+            H[lamp] += O[:, i] * s[lamp]
+    per = max(1, FACE_RAYS // pts.shape[1])
+    o = np.repeat(pts.reshape(-1, 3), per, axis=0)
+    face = np.repeat(np.arange(n), pts.shape[1] * per)
+    nrm = objects.normal[face]
+    x1, x2 = stratified_unit_square(len(pts.reshape(-1, 3)), per, rng)
+    d = cosine_directions(nrm, x1.reshape(-1, 1), x2.reshape(-1, 1))
+    o = o + offset * nrm
+    B_room, t_room, _ = _room_radiosity_along(sol, room, lookup, o, d)
+    t_obj, prim = objects.occluder.first_hit(o, d)
+    other = objects.occluder.patch_of_triangle[np.maximum(prim, 0)]
+    obj_first = (prim >= 0) & (t_obj < t_room) & \
+        (np.einsum("ij,ij->i", d, objects.normal[other]) < 0)
+    B_room[:, (prim >= 0) & (t_obj < t_room)] = 0.0
+    count = np.bincount(face, minlength=n).astype(float)
+    G = np.stack([np.stack([np.bincount(face, B_room[j, :, c], n) for c in range(3)], -1)
+                  for j in range(k)]) / count[None, :, None]
+    B = objects.rho[None] * (H + G)
+    for _ in range(OBJECT_BOUNCES - 1):
+        src = np.zeros((k, len(o), 3))
+        src[:, obj_first] = B[:, other[obj_first]]
+        G2 = np.stack([np.stack([np.bincount(face, src[j, :, c], n) for c in range(3)], -1)
+                       for j in range(k)]) / count[None, :, None]
+        B = objects.rho[None] * (H + G + G2)
+    return B
+
+
+def _cone_directions(axis, cos_max, x1, x2):
+    """Uniform unit directions in the cones of half-angle arccos(cos_max) around ``axis``."""
+    helper = np.where(np.abs(axis[:, :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = np.cross(axis, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(axis, t1)
+    cos_t = 1.0 - x1 * (1.0 - cos_max)
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t ** 2, 0.0))
+    phi = 2.0 * np.pi * x2
+    return (sin_t * np.cos(phi))[:, None] * t1 + (sin_t * np.sin(phi))[:, None] * t2 \
+        + cos_t[:, None] * axis
+
+
+def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
+                rays=CONE_RAYS):
+    """Change of every leaf's irradiance per lamp (k, L, 3) where it sees an object: (from lamp
+    patches, from the rest), both at the solution's exitance factors."""
+    h = sol.hierarchy
+    leaves = sol.leaves
+    k, L = len(sol.basis), len(leaves)
+    d_dir, d_ind = np.zeros((k, L, 3)), np.zeros((k, L, 3))
+    rng = np.random.default_rng([int(seed), 0xC0E])
+    x = h.centroid[leaves]
+    nrm = h.normal[leaves]
+    r_leaf = np.linalg.norm(h.corners[leaves] - x[:, None], axis=2).max(axis=1)
+    offset = ray_offset(scale)
+    for obj in range(len(objects.radius)):
+        c, R = objects.centre[obj], objects.radius[obj]
+        to_c = c - x
+        dist = np.linalg.norm(to_c, axis=1)
+        sin_a = np.clip(R / np.maximum(dist - r_leaf, 1e-300), 0.0, 1.0)
+        solid = 2.0 * np.pi * (1.0 - np.sqrt(1.0 - sin_a ** 2))
+        sel = np.flatnonzero((np.einsum("ij,ij->i", nrm, to_c) > -(R + r_leaf))
+                             & ((dist <= R + r_leaf) | (solid > MIN_SOLID_ANGLE)))
+        if not len(sel):
+            continue
+        o = random_points(h.corners[leaves[sel]], rays, rng).reshape(-1, 3)
+        which = np.repeat(sel, rays)
+        n_o = nrm[which]
+        o = o + offset * n_o
+        x1, x2 = stratified_unit_square(len(sel), rays, rng)
+        x1, x2 = x1.ravel(), x2.ravel()
+        to = c - o
+        d_o = np.linalg.norm(to, axis=1)
+        inside = d_o <= R
+        cos_max = np.sqrt(np.maximum(1.0 - (R / np.maximum(d_o, 1e-300)) ** 2, 0.0))
+        d = _cone_directions(to / np.maximum(d_o, 1e-300)[:, None], cos_max, x1, x2)
+        cos_n = np.einsum("ij,ij->i", d, n_o)
+        w = 2.0 * np.pi * (1.0 - cos_max) / rays * np.maximum(cos_n, 0.0) / np.pi
+        if inside.any():                       # within the sphere: the whole hemisphere
+            d[inside] = cosine_directions(n_o[inside], x1[inside, None], x2[inside, None])
+            w[inside] = 1.0 / rays
+        live = np.flatnonzero(w > 0)
+        o, d, w, which = o[live], d[live], w[live], which[live]
+        t_obj, prim = objects.occluder.first_hit(o, d)
+        face = objects.occluder.patch_of_triangle[np.maximum(prim, 0)]
+        # a ray counts for the object whose cone it was cast in (another's cone covers the rest)
+        mine = (prim >= 0) & (objects.owner[face] == obj)
+        B_room, t_room, lamp = _room_radiosity_along(sol, room, lookup, o[mine], d[mine])
+        first = t_obj[mine] < t_room
+        idx = np.flatnonzero(mine)[first]
+        B_room, lamp = B_room[:, first], lamp[first]
+        front = np.einsum("ij,ij->i", d[idx], objects.normal[face[idx]]) < 0
+        gain = np.where(front[None, :, None], B_obj[:, face[idx]], 0.0)   # inside: dark
+        ww = w[idx][None, :, None]
+        at = which[idx]
+        for j in range(k):
+            for ch in range(3):
+                d_ind[j, :, ch] += np.bincount(at, ww[0, :, 0] * (gain[j, :, ch]
+                                              - np.where(lamp, 0.0, B_room[j, :, ch])), L)
+                d_dir[j, :, ch] -= np.bincount(at, ww[0, :, 0] * np.where(lamp, B_room[j, :, ch],
+                                                                          0.0), L)
+    return d_dir, d_ind
+
+
+def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
+    """(k, L, 3) change of the direct light of ``sol.scene.lights`` on the leaves (at the
+    solution's exitance factors), cast again only where an object can shadow them."""
+    h, leaves = sol.hierarchy, sol.leaves
+    k = len(sol.basis)
+    out = np.zeros((k, len(leaves), 3))
+    if not len(sol.scene.lights):
+        return out
+    x = h.centroid[leaves]
+    r_leaf = np.linalg.norm(h.corners[leaves] - x[:, None], axis=2).max(axis=1)
+    sel = np.flatnonzero(may_be_shadowed_at(sol.scene, x, r_leaf, objects.triangles))
+    if not len(sel):
+        return out
+    s = np.ones(k) if sol.emission_scale is None else np.asarray(sol.emission_scale, float)
+    args = (quality.quadrature, quality.rays, int(seed), scale)
+    with_, _ = lights_on_elements(sol.scene, h, leaves[sel], EitherOccluder(room, objects.occluder),
+                                  *args)
+    without, _ = lights_on_elements(sol.scene, h, leaves[sel], room, *args)
+    out[:, sel] = (with_ - without) * s[:, None, None]
+    return out
+
+
+def texel_direct_change(result, objects: VirtualObjects, make_light, seed):
+    """(k, T, 3) change of each lamp's direct light on the texels (at the exitance factors),
+    cast only where an object can shadow it.  ``make_light(tm, occluder, seed)``: the run's
+    TexelLight on texels ``tm``."""
+    tm = result.texel_map
+    scene = result.scene if result.scene is not None else result.solution.scene
+    k = scene.n_lamps
+    out = np.zeros((k, tm.n_texels, 3))
+    mask = may_be_shadowed(scene, tm, objects.triangles)
+    if not mask.any():
+        return out
+    sub = texel_subset(tm, mask)
+    _, O_with = make_light(sub, EitherOccluder(result.occluder, objects.occluder), seed).direct()
+    _, O_without = make_light(sub, result.occluder, seed).direct()
+    s = np.asarray(result.exitance_scale, float)
+    out[:, mask] = np.moveaxis((O_with - O_without) * s[None, :, None], 1, 0)
+    return out
+
+
+def irradiance_change(result, objects: VirtualObjects, make_light, seed=0):
+    """(k, T, 3) change of each lamp's irradiance on the texels of a texel-mode result that the
+    virtual ``objects`` bring: their shadows and the light they block and reflect."""
+    sol = result.solution
+    q = sol.quality
+    scale = sol.context.get("scale", 1.0)
+    room = sol.context.get("occluder")
+    if room is None or getattr(room, "patch_of_triangle", None) is None:
+        room = sol.scene.make_occluder()
+    lookup = _leaf_lookup(sol)
+    B_obj = object_radiosity(objects, sol, room, lookup, scale, q.rays, seed)
+    d_dir, d_ind = leaf_change(objects, B_obj, sol, room, lookup, scale, seed)
+    d_light = light_change(objects, sol, room, scale, q, seed)
+    # What the leaves reflect of their change travels through the room's own links.
+    rho = np.asarray(sol.system.rho, float)
+    dE = rho[:, :, None] * np.moveaxis(d_dir + d_ind + d_light, 0, 2)             # (L, 3, k)
+    dB = np.moveaxis(sol.system.solve(dE, q.solver, tol=q.tol)[0], 2, 0)          # (k, L, 3)
+    tr = Transport(sol)
+    ind = d_ind + tr.per_lamp(tr.occ, dB) - tr.per_lamp(tr.dir_occ, dB)
+    read = make_light(result.texel_map, result.occluder, seed).reader(sol)
+    d_texel = np.stack([read(x) for x in ind])
+    return d_texel + texel_direct_change(result, objects, make_light, seed + 1)
