@@ -14,6 +14,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit, photographed_office  # noqa: E402
 from scenes.materials import grey_diffuse  # noqa: E402
@@ -74,9 +75,12 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
 
 
 def _images(info):
-    """The relit materials' map images of the office's surfaces, as float arrays by name."""
+    """The relit materials' map images of the office's surfaces (every mesh when ``info`` is
+    None), as float arrays by name."""
     out = {}
-    for name in info.objects:
+    names = info.objects if info is not None else \
+        [o.name for o in bpy.data.objects if o.type == "MESH"]
+    for name in names:
         for slot in bpy.data.objects[name].material_slots:
             for node in slot.material.node_tree.nodes:
                 image = getattr(node, "image", None)
@@ -128,3 +132,79 @@ def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(monkeyp
     gone = _images(info)
     for n in room:
         assert np.array_equal(gone[n], room[n]), n
+
+
+REOPEN = r"""
+import json, sys
+sys.path[:0] = [ROOT, HERE]
+import numpy as np
+import bpy
+from scenes.addon import register_repo_addon
+register_repo_addon()
+bpy.ops.wm.open_mainfile(filepath=BLEND)
+from test_virtual_objects import _images
+scene = bpy.context.scene
+out = {"objects_saved": bool(scene["relight_status"].get("objects"))}
+z = np.load(MAPS)
+saved = {n: z["with_" + str(i)] for i, n in enumerate(z["names"])}
+room = {n: z["room_" + str(i)] for i, n in enumerate(z["names"])}
+names = [str(n) for n in z["names"]]
+now = {n: a for n, a in _images(None).items()}
+out["reopened_as_saved"] = all(np.array_equal(now[n], saved[n]) for n in names)
+box = bpy.data.objects["VBox"]
+box.location.x += 0.4
+bpy.context.view_layer.update()
+out["move"] = sorted(bpy.ops.relight.update())
+moved = _images(None)
+out["moved_changed"] = sorted(n for n in names if not np.array_equal(moved[n], saved[n]))
+bpy.data.objects.remove(box)
+bpy.context.view_layer.update()
+out["delete"] = sorted(bpy.ops.relight.update())
+gone = _images(None)
+out["room_back"] = max(float(np.abs(gone[n] - room[n]).max()) for n in names)
+print("RELIGHT_REOPEN_JSON " + json.dumps(out))
+"""
+
+
+def test_an_exact_object_undoes_and_survives_save_and_reopen(tmp_path):
+    """Undo after the Update that inserted a virtual object gives the room's maps back, redo
+    its shadow; saved and reopened in a fresh process (no result in memory), moving it and
+    Update recomputes its shadow, and deleting it and Update gives the room's maps back."""
+    import json
+    import subprocess
+    info, *_ = photographed_office(lambda info, power: None)
+    assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
+    room = _images(info)
+    bpy.ops.ed.undo_push(message="precomputed")
+    box = _grey_box((2.7, 3.2, 0.3))
+    box.relight_role = "virtual"
+    bpy.context.view_layer.update()
+    bpy.ops.ed.undo_push(message="box added")
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="updated")
+    with_box = _images(info)
+    assert any(not np.array_equal(room[n], with_box[n]) for n in room)
+    bpy.ops.ed.undo()
+    assert all(np.array_equal(room[n], a) for n, a in _images(info).items())
+    bpy.ops.ed.redo()
+    assert all(np.array_equal(with_box[n], a) for n, a in _images(info).items())
+
+    names = sorted(room)
+    maps = str(tmp_path / "maps.npz")
+    np.savez(maps, names=np.array(names), **{f"with_{i}": with_box[n] for i, n in enumerate(names)},
+             **{f"room_{i}": room[n] for i, n in enumerate(names)})
+    blend = str(tmp_path / "exact_object.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True)
+    code = (REOPEN.replace("ROOT", repr(ROOT)).replace("HERE", repr(HERE))
+            .replace("BLEND", repr(blend)).replace("MAPS", repr(maps)))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=str(tmp_path), capture_output=True,
+                          text=True, timeout=600)
+    line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RELIGHT_REOPEN_JSON ")),
+                None)
+    assert proc.returncode == 0 and line, (proc.stdout[-3000:], proc.stderr[-3000:])
+    out = json.loads(line.split(" ", 1)[1])
+    print(out)
+    assert out["objects_saved"] and out["reopened_as_saved"]
+    assert out["move"] == ["FINISHED"] and out["delete"] == ["FINISHED"]
+    assert any(n.startswith("Floor") for n in out["moved_changed"])
+    assert out["room_back"] <= 1e-5
