@@ -22,8 +22,10 @@ def _closed_box(rho, emission):
 def test_furnace_every_leaf_matches_closed_form(rho):
     """Uniform emission: B = E / (1 - rho) on every leaf (row sums of F are exactly one)."""
     scene = _closed_box(rho, 2.0)
-    # Everything emits, so the oracle refines hard: a looser threshold keeps the test quick.
-    sol = solve_radiosity(scene, PRESETS["medium"].with_(eps_bf=0.006, min_area=1e-3))
+    # Judged link by link (not by the sum a receiver gathers, which is flat here), the oracle
+    # refines hard: a hierarchical mesh to check, and a looser threshold keeps the test quick.
+    sol = solve_radiosity(scene, PRESETS["medium"].with_(eps_bf=0.006, min_area=1e-3,
+                                                         aggregate=False))
     B = sol.radiosity()
     exact = 2.0 / (1.0 - rho)
     assert np.all(np.isfinite(B))
@@ -58,6 +60,31 @@ def test_furnace_with_non_uniform_emission_conserves_power(rho):
     spread = B[:, 0].max() / B[:, 0].min()
     assert spread > 1.1                           # not uniform: the check is not the furnace's
     assert B.max() <= 3.0 / (1 - rho)
+
+
+@pytest.mark.parametrize("preset", ["draft", "medium"])
+def test_a_furnace_at_rho_0_99_is_not_refined_where_nothing_varies(preset):
+    """A closed cube at rho 0.99: with uniform emission B = E / (1 - rho) everywhere and the six
+    walls need no subdivision (1.5 M links at medium before the receiver test judged the sum it
+    gathers); with one wall emitting, power is conserved to 0.1 % (sum A B = sum A E / (1 -
+    rho)) with no more than twice the Cornell box's links at the same preset."""
+    rho = 0.99
+    faces = flip(quads_from_boxes([0, 0, 0], [1.0, 1.0, 1.0]))
+    uniform = SceneData(faces, rho, np.ones((6, 3)), np.zeros(6, int), ["walls"])
+    sol = solve_radiosity(uniform, preset)
+    assert np.abs(sol.radiosity() * (1 - rho) - 1.0).max() < 1e-10
+    assert sol.links.n <= 30 * 4
+    emission = np.zeros((6, 3))
+    emission[-1] = [3.0, 2.0, 1.0]
+    one_wall = SceneData(faces, rho, emission, np.where(emission[:, 0] > 0, 0, -1), ["wall"])
+    sol = solve_radiosity(one_wall, preset)
+    a = sol.system.leaf_area
+    emitted = (a[:, None] * one_wall.emission[sol.system.patch]).sum(axis=0)
+    np.testing.assert_allclose((a[:, None] * sol.radiosity()).sum(axis=0), emitted / (1 - rho),
+                               rtol=1e-3)
+    cornell = solve_radiosity(cornell_box(), preset)
+    print(f"{preset}: one wall {sol.links.n} links, Cornell box {cornell.links.n}")
+    assert sol.links.n <= 2 * cornell.links.n
 
 
 def _cube_with_box(rho=0.6):
@@ -290,26 +317,29 @@ def test_a_box_standing_on_the_floor_keeps_the_furnace_exact():
     straddles average their lit part with the part under it (no light reaches that): their
     mean radiosity is lower, and as sources the gather counted that darkness a second time
     (rays to the part under the cube are blocked).  Leaves were then off by up to 3 % at rho 0.5
-    and 10 % at 0.9 (medium).  Now every other leaf is exact to 1 %, and a straddling leaf's
-    exposed part (radiosity.exposure) to 6 %: (B - (1 - a) E) / a = E / (1 - rho), a the
-    leaf's exposed fraction; leaves that nothing reaches (under the cube whole) keep B = E."""
-    for rho in (0.5, 0.9):
-        sol = solve_radiosity(clutter_furnace(rho, touching=True), "medium")
-        S = sol.system
-        B = sol.radiosity()[:, 0]
-        a = S.exposure
-        reached = np.asarray(S.M.sum(axis=1)).ravel() > 0.01
-        exposed = (B - (1.0 - a)) / a
-        rel = np.abs(exposed * (1 - rho) - 1.0)
-        whole = reached & (a == 1)
-        print(f"rho {rho}: leaves {len(B)}, straddling {(a < 1).sum()} (max rel err "
-              f"{rel[a < 1].max():.2e}), unreached {(~reached).sum()}, others max rel err "
-              f"{rel[whole].max():.2e}")
-        assert rel[whole].max() < 0.01
-        # a straddling leaf's exposed fraction is known to a quarter (2 x 2 points at medium):
-        # 1.1 % at rho 0.5, 4.6 % at 0.9
-        assert (a < 1).any() and rel[reached & (a < 1)].max() < 0.06
-        assert np.allclose(B[~reached], 1.0)
+    and 10 % at 0.9 (medium).  Now every other leaf is exact to 2 % and a straddling leaf's
+    exposed part (radiosity.exposure) to 8 % on every seed: (B - (1 - a) E) / a = E / (1 - rho),
+    a the leaf's exposed fraction; leaves that nothing reaches (under the cube whole) keep
+    B = E.  Measured over seeds 0-3 at rho 0.5 / 0.9 / 0.99: others 0.3 / 1.3 / 1.5 %,
+    straddling 3.2 / 7.5 / 5.3 % (the oracle judging a receiver by the sum it gathers; before,
+    0.3 / 0.9 / 3.6 % and 2.4 / 4.6 / 13.6 % with 3-13x the links)."""
+    for rho in (0.5, 0.9, 0.99):
+        for seed in range(4):
+            sol = solve_radiosity(clutter_furnace(rho, touching=True), "medium", seed=seed)
+            S = sol.system
+            B = sol.radiosity()[:, 0]
+            a = S.exposure
+            reached = np.asarray(S.M.sum(axis=1)).ravel() > 0.01
+            exposed = (B - (1.0 - a)) / a
+            rel = np.abs(exposed * (1 - rho) - 1.0)
+            whole = reached & (a == 1)
+            print(f"rho {rho} seed {seed}: leaves {len(B)}, straddling {(a < 1).sum()} (max "
+                  f"rel err {rel[a < 1].max():.2e}), unreached {(~reached).sum()}, others max "
+                  f"rel err {rel[whole].max():.2e}")
+            assert rel[whole].max() < 0.02
+            # a straddling leaf's exposed fraction is known to a quarter (2 x 2 points)
+            assert (a < 1).any() and rel[reached & (a < 1)].max() < 0.08
+            assert np.allclose(B[~reached], 1.0)
 
 
 def test_no_leaf_gathers_more_than_its_hemisphere_in_open_clutter():

@@ -33,6 +33,8 @@ class Quality:
     # suite's room of random photos it sent the lamp fit's rho^ from 0.5 to 0.29
     split_levels: int = 0
     split_near: float = 0.3
+    # a receiver is split for its links' F variation only where the sum over its links varies
+    aggregate: bool = True
     solver: str = "gmres"
     tol: float = 1e-8
     # the shadow-edge fit's bias floor (log-ratio sigma) before the photo overrides a lamp's set
