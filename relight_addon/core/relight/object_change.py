@@ -37,6 +37,7 @@ from .transport import Transport
 
 CONE_RAYS = 64          # per leaf and object, into the object's bounding cone
 FACE_RAYS = 128         # per object face, gathering the room's radiosity
+FACE_RAY_BUDGET = 1 << 18   # rays over all the objects' faces (a dense mesh: fewer per face)
 MIN_SOLID_ANGLE = 1e-3  # sr: an object seen smaller than this from a leaf changes nothing there
 OBJECT_BOUNCES = 2      # gathers of the objects' radiosity (the second adds object to object)
 
@@ -82,8 +83,9 @@ class VirtualObjects:
             pts = scene.corners[ids[owner == o]].reshape(-1, 3)
             centre[o] = 0.5 * (pts.min(0) + pts.max(0))
             radius[o] = np.linalg.norm(pts - centre[o], axis=1).max()
-        occluder = make_occluder(tris)
-        occluder.patch_of_triangle = faces
+        occluder = make_occluder(tris) if len(tris) else None
+        if occluder is not None:
+            occluder.patch_of_triangle = faces
         return VirtualObjects(scene.corners[ids], normal[ids], scene.rho[ids], owner, centre,
                               radius, tris, occluder)
 
@@ -152,7 +154,7 @@ def object_radiosity(objects: VirtualObjects, sol, room, lookup, scale, rays, se
                                 rays, int(rng.integers(2**31)), scale, offset)
         for i, lamp in enumerate(lights.lamp):
             H[lamp] += O[:, i] * s[lamp]
-    per = max(1, FACE_RAYS // pts.shape[1])
+    per = max(1, min(FACE_RAYS, FACE_RAY_BUDGET // max(n, 1)) // pts.shape[1])
     o = np.repeat(pts.reshape(-1, 3), per, axis=0)
     face = np.repeat(np.arange(n), pts.shape[1] * per)
     nrm = objects.normal[face]
@@ -242,14 +244,15 @@ def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
         B_room, lamp = B_room[:, first], lamp[first]
         front = np.einsum("ij,ij->i", d[idx], objects.normal[face[idx]]) < 0
         gain = np.where(front[None, :, None], B_obj[:, face[idx]], 0.0)   # inside: dark
-        ww = w[idx][None, :, None]
-        at = which[idx]
+        # what the object shows replaces what was behind it (a lamp patch: direct light)
+        behind_lamp = np.where(lamp[None, :, None], B_room, 0.0)
+        behind_rest = B_room - behind_lamp
+        wi, at = w[idx], which[idx]
         for j in range(k):
             for ch in range(3):
-                d_ind[j, :, ch] += np.bincount(at, ww[0, :, 0] * (gain[j, :, ch]
-                                              - np.where(lamp, 0.0, B_room[j, :, ch])), L)
-                d_dir[j, :, ch] -= np.bincount(at, ww[0, :, 0] * np.where(lamp, B_room[j, :, ch],
-                                                                          0.0), L)
+                d_ind[j, :, ch] += np.bincount(at, wi * (gain[j, :, ch] - behind_rest[j, :, ch]),
+                                               L)
+                d_dir[j, :, ch] -= np.bincount(at, wi * behind_lamp[j, :, ch], L)
     return d_dir, d_ind
 
 

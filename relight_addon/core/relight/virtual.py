@@ -162,8 +162,10 @@ def add_objects(result, scene, progress=None):
     def make_light(tm, occluder, seed):
         return _texel_light(texel_scene, tm, occluder, opt, seed, proxy,
                             result.solution_texels if tm is result.texel_map else None)
-    delta = irradiance_change(result, VirtualObjects.of(objects, extra), make_light,
-                              opt.seed + 202)
+    virtual = VirtualObjects.of(objects, extra)
+    if not len(virtual.triangles):                  # no face that can block or reflect
+        return dataclasses.replace(result, room=result)
+    delta = irradiance_change(result, virtual, make_light, opt.seed + 202)
     D = np.maximum(np.asarray(result.denominator, float), 0.0)                   # (T, 3)
     lit = D >= np.maximum(DISPLAY_EPS * D.max(axis=0, initial=0.0), 1e-300)
     old = _texel_maps(result)
