@@ -159,8 +159,9 @@ def add_objects(result, scene, progress=None):
     proxy = result.solution.context.get("proxy")
     texel_scene = result.scene if result.scene is not None else result.solution.scene
 
-    def make_light(tm, occluder, seed):
-        return _texel_light(texel_scene, tm, occluder, opt, seed, proxy,
+    def make_light(tm, occluder, seed, samples=None):
+        o = opt if samples is None else dataclasses.replace(opt, texel_samples=samples)
+        return _texel_light(texel_scene, tm, occluder, o, seed, proxy,
                             result.solution_texels if tm is result.texel_map else None)
     virtual = VirtualObjects.of(objects, extra)
     if not len(virtual.triangles):                  # no face that can block or reflect
