@@ -36,7 +36,8 @@ from .settled import may_be_shadowed, may_be_shadowed_at, texel_subset
 from .transport import Transport
 
 CONE_RAYS = 64          # per leaf and object, into the object's bounding cone
-FACE_RAYS = 128         # per object face, gathering the room's radiosity
+FACE_RAYS = 32          # per side of an object face, gathering the room's radiosity (office: 128
+                        # gave the same shadows within 0.07 CIEDE2000 for 0.3 s more)
 FACE_RAY_BUDGET = 1 << 18   # rays over all the objects' faces (a dense mesh: fewer per face)
 MIN_SOLID_ANGLE = 1e-3  # sr: an object seen smaller than this from a leaf changes nothing there
 # points per texel side for the objects' shadows (the maps' direct light has 2: a 10 cm texel
