@@ -32,11 +32,42 @@ VIRTUAL = {
                  target=(1.6, 2.0, 0.7)),
     "area": dict(type="AREA", energy=60.0, location=(4.2, 3.0, 2.0), size=0.5,
                  target=(4.2, 3.0, 0.0)),
+    "disk": dict(type="AREA", shape="DISK", energy=80.0, location=(1.2, 2.6, 2.4), size=0.6,
+                 target=(1.6, 2.0, 0.0)),
+    # an emissive mesh with Relight Role 'virtual' (both sides emit, as in Cycles); energy is
+    # its Emission strength
+    "panel": dict(type="EMISSIVE", energy=12.0, location=(3.6, 1.2, 2.3), size=(0.6, 0.4)),
 }
+
+
+def _panel(bpy, name, spec):
+    """A plane facing down with an Emission-only material, Relight Role 'virtual'."""
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=spec["location"])
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.scale = (*spec["size"], 1.0)
+    obj.rotation_euler = (np.pi, 0.0, 0.0)
+    mat = bpy.data.materials.new(name + "Glow")
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    emit = nt.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = spec["energy"]
+    nt.links.new(emit.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    obj.data.materials.append(mat)
+    obj.relight_role = "virtual"
+    bpy.context.view_layer.update()
+    return obj
+
+
+def _lamp_name(name, spec):
+    return f"{name}/{name}Glow" if spec["type"] == "EMISSIVE" else name
 
 
 def _light(bpy, name, spec):
     from mathutils import Vector
+    if spec["type"] == "EMISSIVE":
+        return _panel(bpy, name, spec)
     light = bpy.data.lights.new(name, spec["type"])
     light.energy = spec["energy"]
     if spec["type"] in ("POINT", "SPOT"):
@@ -45,6 +76,7 @@ def _light(bpy, name, spec):
         light.spot_size, light.spot_blend = 1.0, 0.3
     if spec["type"] == "AREA":
         light.size = spec["size"]
+        light.shape = spec.get("shape", "SQUARE")
     obj = bpy.data.objects.new(name, light)
     obj.location = spec["location"]
     if "target" in spec:
@@ -80,8 +112,10 @@ def main(argv=None):
     truth, objs = {}, {}
     for name, spec in VIRTUAL.items():
         objs[name] = _light(bpy, name, spec)
-        truth[name] = bake_lighting({**off, **{n: 0.0 for n in objs}, name: spec["energy"]},
-                                    samples=SAMPLES, seed=1, texture_size=SIZE)
+        truth[name] = bake_lighting({**off, **{n: 0.0 for n, o in objs.items() if
+                                               o.type == "LIGHT"}, name: spec["energy"]},
+                                    samples=SAMPLES, seed=1, texture_size=SIZE,
+                                    objects=info.objects if spec["type"] == "EMISSIVE" else None)
         objs[name].hide_render = True                 # not read into the precompute
     make_photographed(bpy, info, photo)
     rows = []
@@ -102,7 +136,7 @@ def main(argv=None):
             objs[name].hide_render = False
             bpy.context.view_layer.update()
             vdata, report = read_scene(bpy.context, virtual={name})
-            k = vdata.lamp_names.index(name)
+            k = vdata.lamp_names.index(_lamp_name(name, spec))
             sub = vdata.lights
             sel = np.flatnonzero(sub.lamp == k)
             import dataclasses
@@ -110,7 +144,7 @@ def main(argv=None):
                                                  for f in dataclasses.fields(sub)})
             rows_v.lamp = np.zeros(len(sel), np.int32)
             t0 = time.perf_counter()
-            res2 = add_lamps(res, rows_v, [name])
+            res2 = add_lamps(res, rows_v, [_lamp_name(name, spec)])
             t_add = time.perf_counter() - t0
             objs[name].hide_render = True
             full = tex({n: sum(real_truth[k][n] for k in power) for n in order})

@@ -174,6 +174,20 @@ class SolveJob:
             self.state = "failed"
 
 
+def _group_names(data, report, result):
+    """Names of the groups of ``result``'s patches.  A result kept from an earlier read (Update
+    without a new solve) numbers its groups as that read did; its patches are the room's, in
+    order, so each of its groups is named by the current read's group of the same patches."""
+    import numpy as np
+    kept = np.asarray(result.solution.scene.group)
+    now = np.asarray(data.without_virtual().group)
+    names = {}
+    if len(kept) == len(now):
+        for old, new in zip(*np.unique(np.stack([kept, now]), axis=1)):
+            names[int(old)] = report.groups[int(new)][0]
+    return lambda g: names.get(g, report.groups[g][0])
+
+
 def virtual_indices(report):
     """Lamp indices of the virtual lamps of a read (lights that are not in the photo)."""
     return [k for k, src in enumerate(report.lamp_sources) if src.get("virtual")]
@@ -240,7 +254,7 @@ class _PrecomputeRunner(RelightOperator):
         summary = write.write_results(context, data, read_report, solution)
         moving = self._sync_spheres(context, read_report, solution)
         for sentence in diagnose(solution, solution.photographed,
-                                 lambda g: read_report.groups[g][0]):
+                                 _group_names(data, read_report, solution)):
             read_report.warn(sentence)
         warnings = list(read_report.warnings)          # write_results appended its own
         virtual = virtual_indices(read_report)

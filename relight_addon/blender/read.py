@@ -73,6 +73,10 @@ LIGHT_TYPES = {"POINT", "SPOT", "SUN", "AREA"}
 # polygon vertices), scaled so that its area equals the ellipse's.
 DISK_QUADS = 8
 DEFAULT_RHO = 0.8  # Blender's default base colour
+# A virtual emissive mesh of at most this many emitting faces (both sides counted) is read as
+# polygon lights, so Update adds it to the solved room like a light; a larger one is patches
+# of the room (a new solve), since each polygon light is cast on every texel on its own.
+MAX_POLYGON_LIGHT_FACES = 64
 # Colour spaces whose byte values are already linear (everything else is decoded as sRGB).
 _LINEAR_SPACES = {"Non-Color", "Linear Rec.709", "Linear Rec.2020", "Linear CIE-XYZ D65",
                   "Linear CIE-XYZ E", "Linear DCI-P3 D65", "Linear FilmLight E-Gamut", "ACEScg",
@@ -805,6 +809,12 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
         lights=Lights.concat(light_rows), virtual=cat(virtual_patch, (0,), bool))
     report.zero_area_skipped = data.dropped_degenerate
     report.duplicates_skipped = data.dropped_duplicate
+    polygons = [k for k, src in enumerate(report.lamp_sources) if src.get("virtual_mesh") and
+                0 < int(np.sum(data.lamp == k)) <= MAX_POLYGON_LIGHT_FACES]
+    if polygons:
+        data = data.lamps_as_polygons(polygons)
+        for k in polygons:               # a light now, added after the photo: a virtual lamp
+            report.lamp_sources[k]["virtual"] = True
     for dropped, kept in data.duplicate_groups:
         a, b = report.groups[int(dropped)][0], report.groups[int(kept)][0]
         if a == b:

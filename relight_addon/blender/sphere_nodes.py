@@ -227,12 +227,18 @@ def make_lamp_group(name, key, obj=None, centre=None, radius=0.0):
 def emissive_disk(scene_data, k):
     """(centre, radius) of emissive-face lamp ``k``: the area-weighted centroid of its faces and
     the disk with the same spread (a uniform disk of radius R has RMS radius R / sqrt 2)."""
+    from ..core.lights import POLYGON
+    from ..core.scene import quad_area_normal
     sel = np.flatnonzero(np.asarray(scene_data.lamp) == k)
-    if len(sel) == 0:
+    lights = scene_data.lights
+    rows = np.flatnonzero((lights.lamp == k) & (lights.kind == POLYGON))
+    # its faces: patches, or polygon lights (a small virtual emissive mesh)
+    faces = np.concatenate([scene_data.corners[sel], lights.corners[rows]])
+    if len(faces) == 0:
         return np.zeros(3), 0.0
-    area, _ = scene_data.area_normal()
-    a = np.maximum(area[sel], 0.0)
-    pts = scene_data.corners[sel].mean(axis=1)
+    area, _ = quad_area_normal(faces)
+    a = np.maximum(area, 0.0)
+    pts = faces.mean(axis=1)
     w = a / max(a.sum(), 1e-300)
     centre = (pts * w[:, None]).sum(0)
     rms = float(np.sqrt((w * np.sum((pts - centre) ** 2, axis=1)).sum()))

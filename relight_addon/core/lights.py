@@ -20,6 +20,9 @@ formulas in ``scenes/light_models.py``, the independent reference of the tests).
   only matters near the horizon and for soft shadows.
 * AREA (spread below 180 degrees): exitance M (W/m^2) of a rectangle or ellipse emitting along
   its local -Z, with Cycles' power-conserving spread profile on the Lambertian radiance.
+* POLYGON: exitance M (W/m^2) of one planar face (``corners``, a triangle as (a, b, c, c))
+  emitting on the side of -Z (one row per side): a virtual emissive mesh's face, a lamp that was
+  not in the photo, lit without new patches or links (``SceneData.lamps_as_polygons``).
 
 Visibility: ``rays`` segments per (point group, light), from the group's points (in turn) to
 points spread over the light (a disk facing the receiver, the sun's disc of directions, the area
@@ -36,8 +39,8 @@ import numpy as np
 from .geometry.formfactor import point_to_polygon
 from .geometry.sampling import R2
 
-POINT, SPOT, SUN, AREA = 0, 1, 2, 3
-KIND_NAMES = {POINT: "point", SPOT: "spot", SUN: "sun", AREA: "area"}
+POINT, SPOT, SUN, AREA, POLYGON = 0, 1, 2, 3, 4
+KIND_NAMES = {POINT: "point", SPOT: "spot", SUN: "sun", AREA: "area", POLYGON: "polygon"}
 FIRST_RAYS = 16
 ELLIPSE_SEGMENTS = 32          # polygon of an ellipse (same area) for the exact form factor
 _CHUNK = 1 << 18               # (point, ray) pairs per ray-casting batch
@@ -50,7 +53,8 @@ class Lights:
     axes (n, 3, 3): rows are the light object's unit local X, Y, Z axes in world space (a spot
     and an area light emit along -Z, a sun shines along -Z); scale (n, 3): the object's scale
     along them (it shapes a spot's cone).  size (n, 2): an area light's world widths along X and
-    Y (diameters when ``round``).  See the module docstring for ``intensity``.
+    Y (diameters when ``round``).  corners (n, 4, 3): a POLYGON's face (zeros for the others);
+    its ``radius`` bounds it around ``position``.  See the module docstring for ``intensity``.
     """
     kind: np.ndarray
     lamp: np.ndarray
@@ -66,11 +70,12 @@ class Lights:
     size: np.ndarray
     round: np.ndarray
     spread: np.ndarray
+    corners: np.ndarray
 
     def __post_init__(self):
         n = len(np.atleast_1d(self.kind))
         shapes = {"position": (n, 3), "axes": (n, 3, 3), "scale": (n, 3), "intensity": (n, 3),
-                  "size": (n, 2)}
+                  "size": (n, 2), "corners": (n, 4, 3)}
         for f in fields(self):
             a = np.asarray(getattr(self, f.name))
             dtype = {"kind": np.int8, "lamp": np.int32, "soft_falloff": bool,
@@ -98,13 +103,37 @@ class Lights:
     def make(kind, lamp, matrix, intensity, radius=0.0, soft_falloff=True, spot_size=np.pi / 4,
              spot_blend=0.15, angle=0.0, size=(1.0, 1.0), round=False, spread=np.pi):
         """One light from its object's 4x4 world ``matrix`` (position, axes and scale)."""
+        if kind == POLYGON:
+            raise ValueError("a polygon light is made with Lights.polygons")
         m = np.asarray(matrix, np.float64)
         cols = m[:3, :3].T                                   # rows: world images of X, Y, Z
         scale = np.linalg.norm(cols, axis=1)
         axes = cols / np.maximum(scale, 1e-300)[:, None]
         return Lights(kind, lamp, m[:3, 3], axes, scale, np.asarray(intensity, float), radius,
                       soft_falloff, spot_size, spot_blend, angle, np.asarray(size, float), round,
-                      spread)
+                      spread, np.zeros((4, 3)))
+
+    @staticmethod
+    def polygons(lamp, corners, exitance) -> "Lights":
+        """POLYGON lights: faces ``corners`` (n, 4, 3), each emitting ``exitance`` (n, 3) on the
+        side its corners wind counter-clockwise around (their area normal)."""
+        c = np.asarray(corners, np.float64).reshape(-1, 4, 3)
+        n = len(c)
+        if n == 0:
+            return Lights.empty()
+        cross = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1]) * 0.5
+        area = np.linalg.norm(cross, axis=1)
+        normal = cross / np.maximum(area, 1e-300)[:, None]
+        centre = c.mean(axis=1)
+        u = c[:, 1] - c[:, 0]
+        u -= np.einsum("ij,ij->i", u, normal)[:, None] * normal
+        u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+        v = np.cross(-normal, u)
+        axes = np.stack([u, v, -normal], axis=1)           # emits along local -Z = the normal
+        radius = np.linalg.norm(c - centre[:, None], axis=2).max(axis=1)
+        return Lights(np.full(n, POLYGON), np.broadcast_to(lamp, (n,)), centre, axes,
+                      np.ones((n, 3)), np.asarray(exitance, float), radius, True, 0.0, 0.0, 0.0,
+                      np.zeros((n, 2)), False, np.pi, c)
 
     @property
     def emit_axis(self) -> np.ndarray:
@@ -113,6 +142,8 @@ class Lights:
 
     def polygon(self, i) -> np.ndarray:
         """(k, 3) outline of area light ``i`` (an equal-area polygon for an ellipse)."""
+        if self.kind[i] == POLYGON:
+            return self.corners[i]
         u, v = self.axes[i, 0], self.axes[i, 1]
         lu, lv = self.size[i]
         if self.round[i]:
@@ -131,7 +162,7 @@ class Lights:
         colour = np.where(peak > 0, self.intensity / np.where(peak > 0, peak, 1.0), 0.0)
         return [self.kind, self.lamp, self.position, self.axes, self.scale, colour, self.radius,
                 self.soft_falloff, self.spot_size, self.spot_blend, self.angle, self.size,
-                self.round, self.spread]
+                self.round, self.spread, self.corners]
 
 
 # -- closed forms ------------------------------------------------------------------------------
@@ -194,7 +225,7 @@ def _closed_form(lights, i, p, n):
         if sb < 1e-6:
             return np.maximum(ct, 0.0)
         return cone_irradiance(sb, ct) / (np.pi * sb * sb)
-    if kind == AREA:
+    if kind in (AREA, POLYGON):
         poly = lights.polygon(i)
         return point_to_polygon(p, n, np.broadcast_to(poly, (len(p),) + poly.shape),
                                 np.broadcast_to(lights.emit_axis[i], p.shape))
@@ -240,6 +271,17 @@ def _samples(lights, i, p, j, shift, far):
         ph = 2 * np.pi * xv
         d = cz[:, None] * axis + (sz * np.cos(ph))[:, None] * t1 + (sz * np.sin(ph))[:, None] * t2
         return p + far * d
+    if kind == POLYGON:
+        # uniform over the face: the triangles (a, b, c) and (a, c, d) by their areas
+        a, b, c, d = lights.corners[i]
+        a1 = np.linalg.norm(np.cross(b - a, c - a))
+        a2 = np.linalg.norm(np.cross(c - a, d - a))
+        split = a1 / max(a1 + a2, 1e-300)
+        first = xu < split
+        x = np.where(first, xu / max(split, 1e-300), (xu - split) / max(1.0 - split, 1e-300))
+        r = np.sqrt(np.clip(x, 0.0, 1.0))
+        p1, p2 = np.where(first[:, None], b, c), np.where(first[:, None], c, d)
+        return a + (r * (1 - xv))[:, None] * (p1 - a) + (r * xv)[:, None] * (p2 - a)
     if kind == AREA:
         u, v = lights.axes[i, 0], lights.axes[i, 1]
         lu, lv = lights.size[i]
@@ -272,7 +314,7 @@ def _sample_weight(lights, i, p, n, q):
     kind = lights.kind[i]
     if kind == SPOT:
         return cos_r * spot_mask(lights, i, -d), cos_r
-    if kind == AREA:
+    if kind in (AREA, POLYGON):
         cos_l = np.maximum(-(d @ lights.emit_axis[i]) / np.maximum(dist, 1e-300), 0.0)
         k = cos_r * cos_l / np.maximum(dist * dist, 1e-300)
         return k * spread_profile(np.arccos(np.clip(cos_l, -1.0, 1.0)), lights.spread[i]), k

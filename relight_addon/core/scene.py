@@ -233,6 +233,24 @@ class SceneData:
         new._take(np.concatenate([np.flatnonzero(~self.virtual), np.flatnonzero(self.virtual)]))
         return new
 
+    def lamps_as_polygons(self, lamps) -> "SceneData":
+        """A copy where the patches of ``lamps`` (indices) are POLYGON lights instead: the same
+        light, but no patches, so no new elements or links (a virtual emissive mesh, which
+        blocks nothing, can then be added to a solved room like any other light).  Each face
+        emits on the side of its normal (a two-sided face is two patches)."""
+        from .lights import Lights
+        move = np.flatnonzero(np.isin(self.lamp, list(lamps)))
+        if len(move) == 0:
+            return self
+        rows = [Lights.polygons(int(k), self.corners[move[self.lamp[move] == k]],
+                                self.emission[move[self.lamp[move] == k]])
+                for k in np.unique(self.lamp[move])]
+        new = object.__new__(SceneData)
+        new.__dict__.update(self.__dict__)
+        new._take(np.setdiff1d(np.arange(self.n_patches), move))
+        new.lights = Lights.concat([self.lights] + rows)
+        return new
+
     def without_lamps(self, drop) -> "SceneData":
         """A shallow copy without the lamps ``drop`` (indices) that are lights (core Lights,
         not patches): the other lamps keep their order, renumbered."""
