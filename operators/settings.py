@@ -62,24 +62,38 @@ OVERLAY_ITEMS = (
     ("LINKS", "Links", "The links that carry the most light"),
 )
 
-# scene.session_uid -> (run id, ShadowFreeResult): the last result of each scene, in memory.
+# scene.session_uid -> [(run id, ShadowFreeResult)], newest last: the last result of each
+# scene in memory, and the one before it while its maps are small enough (an undo of the last
+# Update brings back the status that names it, and the next Update starts from it, not from a
+# new solve).
 _RESULTS = {}
+KEEP_PREVIOUS_BYTES = 256 << 20
+
+
+def _map_bytes(result):
+    return sum(int(getattr(a, "nbytes", 0)) for part in (result.maps, result.texture)
+               for a in (part or {}).values())
 
 
 def last_result(scene):
-    """The result of ``scene``'s last precompute in this session, if its status still names it
-    (undo, reload or Clear make it unavailable)."""
-    entry = _RESULTS.get(scene.session_uid)
+    """The result of ``scene``'s last precompute in this session that its status names (Undo
+    of the last Update brings back the one before; reload or Clear make it unavailable)."""
     st = status(scene)
-    if entry is None or not st or st.get("run") != entry[0]:
+    if not st:
         return None
-    return entry[1]
+    for run, result in reversed(_RESULTS.get(scene.session_uid, ())):
+        if st.get("run") == run:
+            return result
+    return None
 
 
 def remember(scene, result):
     """Keep ``result`` as ``scene``'s last result; returns the run id stored in its status."""
     run = uuid.uuid4().hex
-    _RESULTS[scene.session_uid] = (run, result)
+    kept = _RESULTS.get(scene.session_uid, [])[-1:]
+    if kept and _map_bytes(kept[0][1]) > KEEP_PREVIOUS_BYTES:
+        kept = []
+    _RESULTS[scene.session_uid] = kept + [(run, result)]
     return run
 
 

@@ -133,3 +133,44 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
     assert f"M {name}" not in mat.node_tree.nodes
     assert name not in list(bpy.context.scene["relight_status"]["lamps"])
 
+
+def test_a_virtual_lamp_undoes_and_redoes(monkeypatch):
+    """Undo after the Update that inserted a virtual lamp gives the room's materials and maps
+    back (no map of it left), redo gives its map back; an Update after the undo starts from
+    the room's result again (no new solve) and gives the same maps."""
+    import importlib
+    from test_virtual_lamps import _add_point
+    from test_virtual_objects import _images
+    info, *_ = photographed_office(lambda info, power: None)
+    assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
+    room = _images(info)
+    bpy.ops.ed.undo_push(message="precomputed")
+    _add_point("Virtual", (3.8, 1.0, 1.6), 150.0)
+    bpy.ops.ed.undo_push(message="lamp added")
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="updated")
+    with_lamp = _images(info)
+    assert len(with_lamp) > len(room)                 # its own map on every relit surface
+
+    def floor_nodes():
+        return bpy.data.objects["Floor"].material_slots[0].material.node_tree.nodes
+    assert "M Virtual" in floor_nodes()
+    bpy.ops.ed.undo()
+    assert "M Virtual" not in floor_nodes()
+    assert _images(info).keys() == room.keys()
+    assert all(np.array_equal(room[n], a) for n, a in _images(info).items())
+    assert "Virtual" in bpy.data.objects              # the lamp itself is still there
+    bpy.ops.ed.redo()
+    assert "M Virtual" in floor_nodes()
+    assert all(np.array_equal(with_lamp[n], a) for n, a in _images(info).items())
+    bpy.ops.ed.undo()
+    ops = importlib.import_module("relight_ext.operators.precompute")
+    solves = []
+    solve = ops.run_precompute
+    monkeypatch.setattr(ops, "run_precompute", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    assert bpy.ops.relight.update() == {"FINISHED"}   # after the undo: the lamp again
+    assert solves == []
+    got = _images(info)
+    assert "M Virtual" in floor_nodes()
+    for n, a in with_lamp.items():
+        assert np.allclose(got[n], a, atol=1e-5), n
