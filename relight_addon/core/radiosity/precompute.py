@@ -23,6 +23,7 @@ from ..lights import light_irradiance
 from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
 from .conserve import COVERAGE_RAYS, conserve_rows, hemisphere_coverage
+from .contacts import contact_segments, split_at_contacts
 from .exposure import leaf_exposure
 from .source_split import split_sources
 from .hierarchy import Hierarchy
@@ -347,6 +348,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         h = Hierarchy(scene)
         total_area = float(h.view("area").sum())
         min_area = q.min_area * total_area
+        if q.contact_levels > 0:
+            segments, on_patch = contact_segments(scene, scale)
+            split_at_contacts(h, segments, on_patch, min_area / 4 ** q.contact_levels)
         rho_max = scene.rho.max(axis=1)
         e_max = scene.emission.max(axis=1)
         receives = rho_max > 0
