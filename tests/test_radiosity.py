@@ -312,34 +312,42 @@ def test_clutter_furnace_is_exact_at_every_preset(preset, rho):
     assert rel.max() < 0.01
 
 
-def test_a_box_standing_on_the_floor_keeps_the_furnace_exact():
-    """The clutter furnace with a 2 cm cube standing on the floor.  The floor leaves it
-    straddles average their lit part with the part under it (no light reaches that): their
+@pytest.mark.parametrize("contact_levels,others,straddling", [(0, 0.02, 0.08), (2, 0.01, 0.04)])
+def test_a_box_standing_on_the_floor_keeps_the_furnace_exact(contact_levels, others, straddling):
+    """The clutter furnace with a 10 cm box standing on the floor, at medium.  The floor leaves
+    it straddles average their lit part with the part under it (no light reaches that): their
     mean radiosity is lower, and as sources the gather counted that darkness a second time
-    (rays to the part under the cube are blocked).  Leaves were then off by up to 3 % at rho 0.5
-    and 10 % at 0.9 (medium).  Now every other leaf is exact to 2 % and a straddling leaf's
-    exposed part (radiosity.exposure) to 8 % on every seed: (B - (1 - a) E) / a = E / (1 - rho),
-    a the leaf's exposed fraction; leaves that nothing reaches (under the cube whole) keep
-    B = E.  Measured over seeds 0-3 at rho 0.5 / 0.9 / 0.99: others 0.3 / 1.3 / 1.5 %,
-    straddling 3.2 / 7.5 / 5.3 % (the oracle judging a receiver by the sum it gathers; before,
-    0.3 / 0.9 / 3.6 % and 2.4 / 4.6 / 13.6 % with 3-13x the links)."""
+    (rays to the part under the box are blocked).  Leaves were then off by up to 3 % at rho 0.5
+    and 10 % at 0.9.  Now (radiosity.exposure) every other leaf is exact to 2 % and a
+    straddling leaf's exposed part to 8 %: (B - (1 - a) E) / a = E / (1 - rho), a the leaf's
+    exposed fraction; leaves that nothing reaches (under the box whole) keep B = E.  With the
+    box's outline split (radiosity.contacts, 2 levels; off in the presets) the issue's 1 % holds:
+    over seeds 0-3 at rho 0.5 / 0.9 / 0.99 others 0.32 / 0.29 / 0.76 %, straddling at most
+    0.5 % (without: 0.28 / 1.33 / 1.14 % and 3.2 / 7.5 / 5.3 %; before the exposure change
+    0.3 / 1.3 / 1.5 %).  Draft misses it: 7.8 / 26 / 40 % over the same seeds
+    (radiosity.exposure)."""
+    quality = PRESETS["medium"].with_(contact_levels=contact_levels)
     for rho in (0.5, 0.9, 0.99):
+        worst = [0.0, 0.0]
         for seed in range(4):
-            sol = solve_radiosity(clutter_furnace(rho, touching=True), "medium", seed=seed)
+            sol = solve_radiosity(clutter_furnace(rho, touching=True), quality, seed=seed)
             S = sol.system
             B = sol.radiosity()[:, 0]
             a = S.exposure
-            reached = np.asarray(S.M.sum(axis=1)).ravel() > 0.01
-            exposed = (B - (1.0 - a)) / a
-            rel = np.abs(exposed * (1 - rho) - 1.0)
-            whole = reached & (a == 1)
-            print(f"rho {rho} seed {seed}: leaves {len(B)}, straddling {(a < 1).sum()} (max "
-                  f"rel err {rel[a < 1].max():.2e}), unreached {(~reached).sum()}, others max "
-                  f"rel err {rel[whole].max():.2e}")
-            assert rel[whole].max() < 0.02
-            # a straddling leaf's exposed fraction is known to a quarter (2 x 2 points)
-            assert (a < 1).any() and rel[reached & (a < 1)].max() < 0.08
+            rows = np.asarray(S.M.sum(axis=1)).ravel()
+            reached = rows > 0.01
+            # straddling: part of it buried (by its quadrature points, or by the hemisphere its
+            # centre sees)
+            part = reached & (a > 0) & ((a < 1) | (rows < 0.99))
+            whole = reached & (a == 1) & ~part
+            rel = np.abs((B - (1.0 - a)) / np.where(a > 0, a, 1.0) * (1 - rho) - 1.0)
+            worst[0] = max(worst[0], rel[whole].max())
+            worst[1] = max(worst[1], rel[part].max(initial=0.0))
             assert np.allclose(B[~reached], 1.0)
+        print(f"contact levels {contact_levels}, rho {rho}: others max rel err {worst[0]:.2e}, "
+              f"straddling {worst[1]:.2e}")
+        assert worst[0] < others
+        assert worst[1] < straddling
 
 
 def test_no_leaf_gathers_more_than_its_hemisphere_in_open_clutter():

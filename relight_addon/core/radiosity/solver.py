@@ -75,8 +75,27 @@ class LeafSystem:
         self.exposure = np.asarray(exposure, float)
         pos, anc = h.ancestor_pairs(self.leaves)
         exposed = np.bincount(anc, self.leaf_area[pos] * self.exposure[pos], h.n)
-        self.P_up = sp.csr_matrix((self.leaf_area[pos] / np.maximum(exposed[anc], 1e-300),
-                                   (anc, pos)), shape=(h.n, len(self.leaves)))
+        area = np.bincount(anc, self.leaf_area[pos], h.n)
+        seen = exposed > 1e-9 * area
+        P_up = sp.csr_matrix((np.where(seen[anc], self.leaf_area[pos], 0.0)
+                              / np.where(seen[anc], exposed[anc], 1.0),
+                              (anc, pos)), shape=(h.n, len(self.leaves)))
+        # An element that its quadrature found buried whole (a leaf gathering at its centre
+        # decides by that point alone) may still be reached by a ray that lands on a part of
+        # it out in the open: that ray sees the radiosity of the exposed surface around it,
+        # the value of its nearest ancestor with an exposed part (0 when the patch is buried).
+        hidden = np.flatnonzero(~seen)
+        if len(hidden):
+            up = hidden.copy()
+            for _ in range(int(h.level[: h.n].max(initial=0)) + 1):
+                move = (up >= 0) & ~seen[np.maximum(up, 0)]
+                if not move.any():
+                    break
+                up[move] = h.parent[up[move]]
+            ok = up >= 0
+            S = sp.csr_matrix((np.ones(int(ok.sum())), (hidden[ok], up[ok])), shape=(h.n, h.n))
+            P_up = P_up + S @ P_up
+        self.P_up = P_up.tocsr()
         return self
 
     def add_clusters(self, U, W):
