@@ -38,6 +38,7 @@ import numpy as np
 
 from .geometry.formfactor import point_to_polygon
 from .geometry.sampling import R2
+from .scene import quad_area_normal
 
 POINT, SPOT, SUN, AREA, POLYGON = 0, 1, 2, 3, 4
 KIND_NAMES = {POINT: "point", SPOT: "spot", SUN: "sun", AREA: "area", POLYGON: "polygon"}
@@ -121,9 +122,7 @@ class Lights:
         n = len(c)
         if n == 0:
             return Lights.empty()
-        cross = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1]) * 0.5
-        area = np.linalg.norm(cross, axis=1)
-        normal = cross / np.maximum(area, 1e-300)[:, None]
+        _, normal = quad_area_normal(c)
         centre = c.mean(axis=1)
         u = c[:, 1] - c[:, 0]
         u -= np.einsum("ij,ij->i", u, normal)[:, None] * normal

@@ -242,9 +242,10 @@ class SceneData:
         move = np.flatnonzero(np.isin(self.lamp, list(lamps)))
         if len(move) == 0:
             return self
-        rows = [Lights.polygons(int(k), self.corners[move[self.lamp[move] == k]],
-                                self.emission[move[self.lamp[move] == k]])
-                for k in np.unique(self.lamp[move])]
+        rows = []
+        for k in np.unique(self.lamp[move]):
+            faces = move[self.lamp[move] == k]
+            rows.append(Lights.polygons(int(k), self.corners[faces], self.emission[faces]))
         new = object.__new__(SceneData)
         new.__dict__.update(self.__dict__)
         new._take(np.setdiff1d(np.arange(self.n_patches), move))

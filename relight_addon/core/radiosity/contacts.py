@@ -15,7 +15,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..scene import quad_area_normal
 from .hierarchy import Hierarchy
+from .links import _segment_ranges
 
 _PLANE_TOL = 1e-4       # x scene size: an edge this close to a plane lies in it
 _INSIDE_TOL = 1e-3      # x the element's diameter: a line along its border does not cross it
@@ -28,7 +30,6 @@ def contact_segments(scene, scale):
     p = len(corners)
     if p < 2:
         return np.zeros((0, 2, 3)), np.zeros(0, np.int64)
-    from ..scene import quad_area_normal
     _, normal = quad_area_normal(corners)
     tol = _PLANE_TOL * scale
     edges = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2)     # (p, 4, 2, 3)
@@ -60,51 +61,36 @@ def contact_segments(scene, scale):
     d = np.einsum("eij,ej->ei", seg[ei] - corners[fj][:, None, 0], normal[fj])
     keep = np.all(np.abs(d) <= tol, axis=1)
     ei, fj = ei[keep], fj[keep]
-    a, b = _clip_to_quad(seg[ei, 0], seg[ei, 1], corners[fj], normal[fj])
-    inside = _crosses(a, b, corners[fj], normal[fj], _INSIDE_TOL * 2 * radius[fj])
+    inside, a, b = _crossing(seg[ei, 0], seg[ei, 1], corners[fj], normal[fj],
+                             _INSIDE_TOL * 2 * radius[fj])
     return np.stack([a[inside], b[inside]], axis=1), fj[inside]
 
 
-def _edge_planes(quads, normals):
-    """Inward normals (n, 4, 3) of a convex planar quad's edges, and a point on each (n, 4, 3)."""
-    e = np.roll(quads, -1, axis=1) - quads
-    inward = np.cross(normals[:, None], e)
+def _crossing(a, b, quads, normals, tol):
+    """(crosses, a', b'): the part a'-b' of segments a-b inside each convex planar quad
+    (Cyrus-Beck clipping; empty parts have a' == b'), and whether it has length and passes
+    inside the quad (its midpoint farther than ``tol`` from every edge).  A triangle's
+    repeated corner (a, b, c, c) makes an edge of no length, which bounds nothing."""
+    edge = np.roll(quads, -1, axis=1) - quads
+    real = np.linalg.norm(edge, axis=2) > 1e-12                                  # (n, 4)
+    inward = np.cross(normals[:, None], edge)
     inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
-    return inward, quads
-
-
-def _clip_to_quad(a, b, quads, normals):
-    """The part of segments a-b inside each quad (Cyrus-Beck); empty parts have a == b."""
-    inward, base = _edge_planes(quads, normals)
     d = b - a
     t0, t1 = np.zeros(len(a)), np.ones(len(a))
     for k in range(4):
-        num = np.einsum("ij,ij->i", a - base[:, k], inward[:, k])      # >= 0 inside
+        num = np.einsum("ij,ij->i", a - quads[:, k], inward[:, k])     # >= 0 inside
         den = np.einsum("ij,ij->i", d, inward[:, k])
-        degenerate = np.linalg.norm(np.roll(quads, -1, axis=1)[:, k] - quads[:, k], axis=1) \
-            <= 1e-12                                                    # (a, b, c, c)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -num / den
-        enter = (den > 0) & ~degenerate
-        leave = (den < 0) & ~degenerate
-        t0 = np.where(enter, np.maximum(t0, t), t0)
-        t1 = np.where(leave, np.minimum(t1, t), t1)
-        outside = (den == 0) & (num < 0) & ~degenerate
-        t1 = np.where(outside, t0, t1)
+        t0 = np.where((den > 0) & real[:, k], np.maximum(t0, t), t0)
+        t1 = np.where((den < 0) & real[:, k], np.minimum(t1, t), t1)
+        t1 = np.where((den == 0) & (num < 0) & real[:, k], t0, t1)      # parallel, outside
     t1 = np.maximum(t1, t0)
-    return a + t0[:, None] * d, a + t1[:, None] * d
-
-
-def _crosses(a, b, quads, normals, tol):
-    """Whether the clipped segment a-b has length and passes inside the quad (its midpoint
-    farther than ``tol`` from every edge)."""
-    inward, base = _edge_planes(quads, normals)
-    mid = 0.5 * (a + b)
-    dist = np.einsum("ikj,ikj->ik", mid[:, None] - base, inward)
-    e = np.roll(quads, -1, axis=1) - quads
-    real = np.linalg.norm(e, axis=2) > 1e-12
+    a, b = a + t0[:, None] * d, a + t1[:, None] * d
+    dist = np.einsum("ikj,ikj->ik", 0.5 * (a + b)[:, None] - quads, inward)
     dist = np.where(real, dist, np.inf)
-    return (np.linalg.norm(b - a, axis=1) > tol) & (dist.min(axis=1) > tol)
+    crosses = (np.linalg.norm(b - a, axis=1) > tol) & (dist.min(axis=1) > tol)
+    return crosses, a, b
 
 
 def split_at_contacts(h: Hierarchy, segments, seg_patch, min_area):
@@ -120,20 +106,19 @@ def split_at_contacts(h: Hierarchy, segments, seg_patch, min_area):
     segments = np.asarray(segments)[order]
     first = np.searchsorted(seg_patch, np.arange(int(h.patch[: h.n].max()) + 2))
     leaves = h.leaves()
-    leaves = leaves[first[h.patch[leaves] + 1] > first[h.patch[leaves]]]
-    cnt = first[h.patch[leaves] + 1] - first[h.patch[leaves]]
+    start = first[h.patch[leaves]]
+    cnt = first[h.patch[leaves] + 1] - start
     li = np.repeat(leaves, cnt)
-    si = np.concatenate([np.arange(first[p], first[p + 1]) for p in h.patch[leaves]]) \
-        if len(leaves) else np.zeros(0, np.int64)
+    si = _segment_ranges(start, cnt)
     while len(li):
         big = h.area[li] > min_area
         li, si = li[big], si[big]
         if len(li) == 0:
             break
-        quads, nrm = h.corners[li], h.normal[li]
-        a, b = _clip_to_quad(segments[si, 0], segments[si, 1], quads, nrm)
+        quads = h.corners[li]
         diam = np.linalg.norm(quads[:, 2] - quads[:, 0], axis=1)
-        hit = _crosses(a, b, quads, nrm, _INSIDE_TOL * diam)
+        hit, _, _ = _crossing(segments[si, 0], segments[si, 1], quads, h.normal[li],
+                              _INSIDE_TOL * diam)
         li, si = li[hit], si[hit]
         if len(li) == 0:
             break

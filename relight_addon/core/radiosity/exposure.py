@@ -47,22 +47,19 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     L = len(leaves)
     a = np.ones(L)
     patch_of = getattr(occluder, "patch_of_triangle", None) if occluder is not None else None
-    if L == 0 or patch_of is None:
+    if L == 0 or patch_of is None or m <= 1:
         return a
     patch_of = np.asarray(patch_of)
     _, patch_normal = scene.area_normal()
     eps = ray_offset(scale)
-    on_points = np.zeros(L, bool) if near is None or m <= 1 else near[leaves]
-    for on_quadrature in (True, False):
-        test = np.flatnonzero(on_points == on_quadrature)
+    on_points = np.zeros(L, bool) if near is None else near[leaves]
+    for test in (np.flatnonzero(on_points), np.flatnonzero(~on_points)):
         if len(test) == 0:
             continue
-        if on_quadrature:
+        if on_points[test[0]]:
             pts, w = quadrature(h.corners[leaves[test]], m)      # (t, m*m, 3), (t, m*m)
-        elif m > 1:
+        else:                                                  # at its centre
             pts, w = h.centroid[leaves[test]][:, None], np.ones((len(test), 1))
-        else:
-            continue
         buried = _buried(pts, h.normal[leaves[test]], occluder, patch_of, patch_normal, eps, rng)
         a[test] = (w * ~buried).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
     return a
