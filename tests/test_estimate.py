@@ -136,9 +136,9 @@ def test_the_indirect_weight_is_voted_by_the_surfaces_not_by_the_steepest():
         w = np.exp(lg)
         return np.abs(dl - np.log(D[a] + w * I[a]) + np.log(D[b] + w * I[b])).sum()
     g_pooled = float(np.exp(minimize_scalar(pooled, bounds=(-3, 3), method="bounded").x))
-    g_vote = _vote_g(D, I, dl, tm, a, b)
+    g_vote = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
     assert g_pooled < 1.5                                  # the pooled fit is dragged down
     assert abs(np.log(g_vote / 2.0)) < 0.13, g_vote         # the vote: within a grid step
     # without the bad pieces both agree
     tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(3), 2.0, 2.0)
-    assert abs(np.log(_vote_g(D, I, dl, tm, a, b) / 2.0)) < 0.13
+    assert abs(np.log(_vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch)) / 2.0)) < 0.13

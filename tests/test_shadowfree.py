@@ -320,3 +320,65 @@ def test_a_lamp_set_four_times_too_weak_is_named(office):
     assert abs((s[1] / s[0]) / 4.0 - 1) < 0.15
     words = diagnose(res, res.photographed)
     assert any("'Lamp B'" in w and "suggests" in w and "used" in w for w in words), words
+
+
+@pytest.fixture
+def photo_resolution(monkeypatch):
+    """The path photo-resolution textures take (more texels than the caches hold), scaled down
+    to the 24^2 office: direct light cast and maps written block by block, the exitance fit
+    on a sample of texel pairs and their texels only, leaf means located block by block."""
+    from relight_addon.core.relight import exitance, texel, texel_maps
+    from relight_addon.core.texture import mapping
+    monkeypatch.setattr(texel, "TEXEL_CHUNK", 256)
+    monkeypatch.setattr(texel, "CACHE_BYTES", 0)
+    monkeypatch.setattr(texel_maps, "BLOCK", 1024)
+    monkeypatch.setattr(mapping, "MEANS_BLOCK", 1000)
+    monkeypatch.setattr(exitance, "PAIRS_WHOLE", 0)
+    monkeypatch.setattr(exitance, "EDGE_PAIRS", 6000)
+
+
+def test_photo_resolution_path_relights_as_the_truth(office, results, photo_resolution):
+    """Through the photo-resolution path the office relights as the truth says (each lamp off,
+    the bounds of test_lamp_switched_off) and the lamp estimate is the whole path's."""
+    from relight_addon.core.relight.texel import TexelLight
+    res = shadow_free(office.scene, ShadowFreeOptions(mode="texel", preset="medium"))
+    assert not TexelLight(res.scene, res.texel_map, None).keeps_direct
+    whole = results["texel"]
+    assert np.allclose(res.exitance_scale, whole.exitance_scale, rtol=0.05), \
+        (res.lamps, whole.lamps)
+    floor = office.de(office.photo, office.truth({}))
+    for lamp in (A, B):
+        I = {lamp: 0.0}
+        truth = office.truth(I)
+        m = office.shadow(lamp)
+        ratio = sum(office.info.lamp_powers[k] * I.get(k, 1.0) for k in (A, B)) / \
+            sum(office.info.lamp_powers.values())
+        d_scale = office.de(office.photo * ratio, truth)[m].mean()
+        got = office.relit(res, I)
+        assert np.isfinite(got).all()
+        d = office.de(got, truth)
+        assert d.mean() < floor.mean() + 0.4, (d.mean(), floor.mean())
+        assert d[m].mean() < 0.4 * d_scale, (d[m].mean(), d_scale)
+
+
+def test_blocks_give_the_whole_maps(office, results, photo_resolution):
+    """Maps, textures, direct parts and denominator written block by block are the ones
+    written at once, bit for bit (the same rays: blocks are whole chunks of the ray casting),
+    for the precompute's maps and for lamps added later (virtual lamps)."""
+    from relight_addon.core.relight.texel_maps import lamp_maps, texel_maps
+    res = results["texel"]
+    sol, scale = res.solution, res.exitance_scale
+    whole = texel_maps(res.texel_light(), sol, scale, res.scene, res.scene.images, block=1 << 30)
+    parts = texel_maps(res.texel_light(), sol, scale, res.scene, res.scene.images, block=768)
+    assert res.texel_map.n_texels > 3 * 768
+    assert np.array_equal(whole.denominator, parts.denominator)
+    for i in whole.maps:
+        assert np.array_equal(whole.maps[i], parts.maps[i])
+        assert np.array_equal(whole.texture[i], parts.texture[i])
+        assert np.array_equal(whole.direct[i], parts.direct[i])
+    lamps = np.arange(sol.scene.n_lamps)
+    m1, d1 = lamp_maps(res.texel_light(), sol, lamps, 1.0, whole.denominator, block=1 << 30)
+    m2, d2 = lamp_maps(res.texel_light(), sol, lamps, 1.0, whole.denominator, block=768)
+    for i in m1:
+        assert np.array_equal(m1[i], m2[i]) and np.array_equal(d1[i], d2[i])
+        assert m1[i].any()

@@ -23,11 +23,14 @@ clear message instead of swapping or being killed.  The model is fitted on
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
   faces) is estimated as the proxy's solve plus ``FACE_BYTES`` per input face.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
-  every used image ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of
-  ``RAY_CHUNK_BYTES``: measured on the office (2 lamps, texel mode, draft, two ray-casting
-  threads of 8k texels), peak RSS 212 MB at 18k texels, 365 MB at 293k, 1008 MB at 1.17 M and
-  3457 MB at 4.7 M, i.e. about 700 bytes per texel with 2 lamps over ~230 MB
-  (benchmarks/results/texel_scaling.md).
+  every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
+  ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
+  (measured on the office, 2 lamps, draft: 420-600 bytes a texel up to 1.17 M texels); past
+  it (photo resolution: the light cast and the maps written block by block, the exitance fit
+  on a sample) ``STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps`` over
+  ``STREAM_BYTES`` (the fit's sample and a block): the photos read, the texel map, the
+  textures and maps written (measured: 648 MB at 4.7 M texels, 1650 MB at 16.5 M over the
+  process's own 209 MB; benchmarks/results/texel_scaling.md).
 """
 from __future__ import annotations
 
@@ -45,6 +48,9 @@ LINKS_PER_LEAF_LOG = 6.0
 TEXEL_BYTES = 200
 TEXEL_LAMP_BYTES = 250
 RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.TEXEL_CHUNK)
+STREAM_BYTES = 280 * 2**20
+STREAM_TEXEL_BYTES = 60
+STREAM_TEXEL_LAMP_BYTES = 18
 # per input face of a mesh solved on a proxy: family room 0 as a scan of 25k-200k faces at
 # medium (benchmarks/results/scan.md) took 471-774 MB over the read, 1.7 kB more a face
 FACE_BYTES = 2 * 1024
@@ -109,4 +115,7 @@ def estimate_texel_memory(scene_data) -> int:
         tex = getattr(images[i], "texels", images[i])
         texels += int(np.prod(np.shape(tex)[:2]))
     lamps = int(getattr(scene_data, "n_lamps", 1))
+    from ..relight.texel import CACHE_BYTES
+    if 48 * texels * max(lamps, 1) > CACHE_BYTES:        # streamed (texel.TexelLight)
+        return int(STREAM_BYTES + texels * (STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps))
     return int(RAY_CHUNK_BYTES + texels * (TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps))

@@ -17,7 +17,7 @@ from scipy.optimize import nnls
 
 from ..radiosity.presets import get_preset
 from ..texture.colour import LUMINANCE, luminance
-from ..texture.mapping import adjacent_texel_pairs
+from ..texture.mapping import adjacent_texel_pairs, count_adjacent_texel_pairs
 from .albedo import RHO_ESTIMATE_MAX, albedo_rounds
 from .transport import leaf_means
 
@@ -241,18 +241,18 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     n_free = (k - 1) + (1 if indirect else 0)
     if n_free == 0 or tm.n_texels == 0:
         return EdgeFit(np.ones(k), 1.0, np.zeros(k), 0.0, np.full(k, 1.0 / max(k, 1)))
-    (D, _), (I, _) = texel_light.parts(sol, scale)
-    D, I = luminance(D[on]), luminance(I[on])                          # (k, T)
+    # ``tm`` is the solution's (texel_light.solution_texels: on a proxy, its patches)
+    pairs, dlog_t = edge_pairs(tm, photo)
+    if texel_light.keeps_direct:
+        light, (a, b) = texel_light, pairs.T
+        (D, _), (I, _) = light.parts(sol, scale, unoccluded=False)
+        D, I = luminance(D[on]), luminance(I[on])                      # (k, T)
+    else:          # photo-resolution textures: the light of the sampled pairs' texels only
+        rows, inv = np.unique(pairs, return_inverse=True)
+        light, (a, b) = texel_light.subset(rows), inv.reshape(-1, 2).T
+        D, I = light.occluded_luminance(sol, scale)
+        D, I = D[on], I[on]
     share = D.sum(axis=1) / max(float(D.sum()), 1e-300)
-    pairs = adjacent_texel_pairs(tm)
-    t_lum = luminance(photo)
-    ok = (t_lum[pairs[:, 0]] > 0) & (t_lum[pairs[:, 1]] > 0)
-    pairs = pairs[ok]
-    if len(pairs) > EDGE_PAIRS:          # photo-resolution textures: a seeded sample of pairs
-        pairs = pairs[np.sort(np.random.default_rng(11).choice(len(pairs), EDGE_PAIRS,
-                                                               replace=False))]
-    a, b = pairs[:, 0], pairs[:, 1]
-    dlog_t = np.log(t_lum[a]) - np.log(t_lum[b])
     Da, Db, Ia, Ib = D[:, a], D[:, b], I[:, a], I[:, b]
     tiny = 1e-9 * max(float((D + I).sum(axis=0).max()), 1e-300)
 
@@ -293,12 +293,13 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     full = solve(None)
     t, g = np.exp(full[:k]), float(np.exp(full[k]))
     if indirect:          # the surfaces' vote at the current ratios (VOTE_*), not the pooled fit
-        g = _vote_g(D.sum(axis=0), I.sum(axis=0), dlog_t, tm, a, b, fallback=g)
+        g = _vote_g(D.sum(axis=0), I.sum(axis=0), dlog_t, light.solution_texels, a, b,
+                    np.bincount(tm.patch), fallback=g)
     if folds <= 1:
         return EdgeFit(t, g, np.zeros(k), 0.0, share)
     # Jackknife over groups of surfaces (patch groups, dealt into folds by texel count): a
     # value that only some surfaces support is not pinned down.
-    group = np.asarray(sol.scene.group)[tm.patch[a]]
+    group = np.asarray(sol.scene.group)[light.solution_texels.patch[a]]
     ids, counts = np.unique(group, return_counts=True)
     if len(ids) < 3:
         return EdgeFit(t, g, np.full(k, np.inf), np.inf, share)
@@ -324,10 +325,31 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # the element-level indirect light does not resolve) wanted g = 0.2-0.4 where most pieces
 # wanted 1.7-2.5, pulled rho^ to 0.29 (true area mean 0.47) and biased every lamp ratio (the
 # weakest lamp by +43 %).
+def edge_pairs(tm, photo):
+    """The neighbouring texel pairs (n, 2) the shadow-edge fit reads, both lit in the photo (at
+    most EDGE_PAIRS of them, a seeded sample), and the photo's log luminance difference over
+    each.  A map of more than PAIRS_WHOLE pairs is thinned image by image as they are listed."""
+    total = count_adjacent_texel_pairs(tm)
+    fraction = 1.0 if total <= PAIRS_WHOLE else min(1.0, 1.5 * EDGE_PAIRS / total)
+    pairs = adjacent_texel_pairs(tm, fraction, seed=11)
+    if fraction < 1.0:       # the photo's luminance at the listed texels only
+        lum = luminance(photo[pairs])
+    else:
+        t_lum = luminance(photo)
+        lum = np.stack([t_lum[pairs[:, 0]], t_lum[pairs[:, 1]]], axis=1)
+    ok = (lum[:, 0] > 0) & (lum[:, 1] > 0)
+    pairs, lum = pairs[ok], lum[ok]
+    if len(pairs) > EDGE_PAIRS:          # photo-resolution textures: a seeded sample of pairs
+        pick = np.sort(np.random.default_rng(11).choice(len(pairs), EDGE_PAIRS, replace=False))
+        pairs, lum = pairs[pick], lum[pick]
+    return pairs, np.log(lum[:, 0]) - np.log(lum[:, 1])
+
+
 # The shadow-edge fit reads at most this many neighbouring texel pairs (every pair of the
 # family's rooms, up to 512 texels a wall: ~0.9 M; the office at 1.17 M texels has 2.3 M, and
 # its Nelder-Mead took 25 of the precompute's 46 s on all of them)
 EDGE_PAIRS = 1_000_000
+PAIRS_WHOLE = 8_000_000          # more pairs than this (~4 M texels) are not listed whole
 VOTE_CELLS = 4
 VOTE_CELL_TEXELS = 32
 VOTE_STEP = 2                                 # grid steps (0.25 in log g)
@@ -336,12 +358,12 @@ VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
 VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
 
 
-def _vote_g(D, I, dlog_t, tm, a, b, fallback=1.0):
+def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
     """The voted indirect weight (``fallback`` where no piece votes) over the pairs of texels
-    (a, b).  D, I (T,): direct and indirect irradiance at the current ratios; dlog_t: the
-    photo's log difference over each pair."""
+    (a, b) of ``tm``.  D, I (T,): direct and indirect irradiance at the current ratios; dlog_t:
+    the photo's log difference over each pair; ``per_patch``: each patch's texels in the whole
+    map (``tm`` may be a sample of it)."""
     # a patch of n texels is cut into c x c cells of about VOTE_CELL_TEXELS^2 (c <= VOTE_CELLS)
-    per_patch = np.bincount(tm.patch)
     cells = np.clip(np.sqrt(per_patch) // VOTE_CELL_TEXELS, 1, VOTE_CELLS).astype(np.int64)
     c = cells[tm.patch[a]]
     cell = (np.minimum((tm.u[a] * c).astype(np.int64), c - 1) * VOTE_CELLS

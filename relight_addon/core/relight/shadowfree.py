@@ -14,7 +14,8 @@ The pipeline below reads top to bottom; each step's idea is a module of its own:
 2. ``mode="texel"`` (default, the seed's conclusion): the direct part of the occluded and
    unoccluded irradiance at every texel by ray casting to each lamp (``texel``), the indirect
    part interpolated from the solution; T_final = T x H_unocc / H_occ and M_k = H_occ,k / D with
-   D = H_occ x the clipped factor, so the original lighting is reproduced exactly.
+   D = H_occ x the clipped factor, so the original lighting is reproduced exactly
+   (``texel_maps``: block by block, so that photo-resolution textures fit in memory).
 3. ``mode="element"`` (the seed's pipeline): texture-based refinement (``refine``, fig 4.7),
    blocked irradiance E-bar and T_inter (eq 4.5-4.6, ``transport``), optionally frontier and
    reference elements (``reference``, fig 4.11, eq 4.8-4.9), and a fresh solution on T_final
@@ -40,11 +41,12 @@ from ..texture.mapping import patch_means, rasterize_patches, texel_elements, ve
 from .albedo import albedo_rounds, estimate_reflectance
 from .exitance import fit_lamps, photo_misfit
 from .orient import orient
-from .maps import (clipped_ratio, direct_fraction, fraction_images, map_images, maps_from,
+from .maps import (clipped_ratio, map_images, maps_from,
                    ratio_maps, texels_of, texture_images)
 from .reference import reference_correction
 from .refine import refine_by_texture
 from .texel import TexelLight
+from .texel_maps import give_back_memory, texel_maps
 from .transport import Transport, as_given
 
 
@@ -188,8 +190,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     image_of = scene.image if scene.image is not None else np.full(scene.n_patches, -1)
     uv = scene.uv if scene.uv is not None else np.zeros((scene.n_patches, 4, 2))
     tm = rasterize_patches(uv, image_of, shapes)
-    photo = tm.gather([texels_of(im) for im in scene.images]).astype(np.float64)
-    white = float(np.percentile(luminance(photo), 99)) if len(photo) else 1.0
+    photo = tm.gather([texels_of(im) for im in scene.images])          # float32
 
     # A scan's dense mesh is solved on a decimated proxy (radiosity.proxy): the direct light
     # is still cast at every texel of the full mesh, the indirect light read on the proxy.
@@ -262,24 +263,16 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
 
     # 2. Per texel: direct light ray-cast at every texel, indirect from the solution.
     if opt.mode == "texel":
-        stage(0.6, "Per-texel irradiance")
-        (O_k, U_k), (ind_occ, ind_un) = texel_light.parts(sol, scale_k)
-        Hocc_k, HU_k = np.maximum(O_k + ind_occ, 0.0), np.maximum(U_k + ind_un, 0.0)
-        Hocc = as_given(Hocc_k, scene)
-        # Removing occlusion never darkens (E-bar >= 0; sampling noise could say otherwise).
-        factor = clipped_ratio(as_given(HU_k, scene), Hocc, fmin=1.0)
-        t_final = photo * factor
-        # D = H_occ x the clipped factor (= H_unocc unless clipped), so that T_final x sum_k
-        # I_k M_k gives the photo back exactly at its own intensities, even where the factor
-        # hit its ceiling.
-        maps = maps_from(Hocc_k, Hocc * factor)
-        stage(0.95, "Writing maps")
-        mp, cov = map_images(tm, maps)
-        direct = fraction_images(tm, direct_fraction(O_k, Hocc_k))
-        return result(texture_images(tm, t_final, scene.images), mp, cov, sol,
-                      denominator=Hocc * factor, direct=direct)
+        stage(0.6, "Per-texel irradiance and maps")
+        del photo, patch_mean            # read again block by block: not held at the peak
+        texel_light.release()
+        give_back_memory()
+        out = texel_maps(texel_light, sol, scale_k, scene, scene.images)
+        return result(out.texture, out.maps, out.coverage, sol, denominator=out.denominator,
+                      direct=out.direct)
 
     # 3. Per element (the seed's pipeline).
+    white = float(np.percentile(luminance(photo), 99)) if len(photo) else 1.0
     if opt.refine:
         stage(0.45, "Texture-based refinement")
         refine_by_texture(sol, tm, photo, white, occluder, opt, scale_k)

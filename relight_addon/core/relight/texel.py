@@ -5,8 +5,14 @@ The direct irradiance from each lamp is linear in the lamps' exitances, so it is
 (scene, texel map) at unit exitance factors and scaled afterwards (the exitance fit and the
 maps reuse it).  It is computed in chunks of texels so that the footprint points and their rays
 stay bounded (about 0.3 kB per texel and lamp are kept, whatever the texture size), on two
-threads (numpy and Embree release the GIL); each chunk has its own seed, so the result does not
-depend on scheduling.
+threads (numpy and Embree release the GIL); each chunk has its own seed (from its first texel's
+place in the whole map), so the result does not depend on scheduling, nor on whether it is cast
+for the whole map or block by block.
+
+Photo-resolution textures (four 2048^2 photos: 16 M texels) are not held whole: while the direct
+light of every texel and lamp fits in CACHE_BYTES it is kept (the exitance fit and the maps both
+read it), past that :meth:`TexelLight.rows` gives a block of texels whose light is cast when it
+is read, and the caller streams (texel_maps.py, the exitance fit's sample of texels).
 """
 from __future__ import annotations
 
@@ -17,10 +23,14 @@ import numpy as np
 from ..scene import bilinear_point
 from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
                                uv_patch_is_triangle, vertex_interpolate)
+from ..texture.colour import luminance
 from .direct import lamp_irradiance
 from .transport import Transport
 
 TEXEL_CHUNK = 1 << 13     # texels whose direct light is computed at once
+# the direct light of every texel and lamp (unoccluded and occluded, float64) is kept while it
+# takes at most this much; a larger map is cast block by block when it is read
+CACHE_BYTES = 256 * 2**20
 
 
 class TexelLight:
@@ -28,7 +38,7 @@ class TexelLight:
     lamp patch, each texel's footprint sampled on a ``samples`` x ``samples`` grid."""
 
     def __init__(self, scene, tm, occluder, rays=32, samples=2, seed=0, solution_texels=None,
-                 normals=None, smooth_read=False, offset=0.0):
+                 normals=None, smooth_read=False, offset=0.0, first=0):
         self.scene, self.tm, self.occluder = scene, tm, occluder
         self.normals = normals        # (T, 3) shading normals instead of the faces' own
         # indirect light read by a kernel over the leaves (radiosity.proxy.SmoothRead) instead
@@ -39,7 +49,15 @@ class TexelLight:
         # where the solution's leaves are read (a radiosity proxy's own patches: proxy.py)
         self.solution_texels = tm if solution_texels is None else solution_texels
         self.rays, self.samples, self.seed = rays, samples, seed
+        self.first = first            # the place of texel 0 in the whole map (the chunk seeds)
         self._direct = None
+        self._subset = (None, None)
+        self._direct_luminance = None
+
+    @property
+    def keeps_direct(self) -> bool:
+        """Whether the direct light of every texel is kept once cast (else: read by blocks)."""
+        return 48 * self.tm.n_texels * max(self.scene.n_lamps, 1) <= CACHE_BYTES
 
     def direct(self):
         """Direct irradiance (T, k, 3) from each lamp at unit exitance factor, unoccluded and
@@ -48,23 +66,75 @@ class TexelLight:
             self._direct = self._cast()
         return self._direct
 
+    def rows(self, start, stop):
+        """This light on the texels start .. stop - 1 (a block of the map): the same rays as
+        the whole map's when ``start`` is a multiple of TEXEL_CHUNK; the direct light already
+        cast is shared."""
+        sl = slice(start, stop)
+        part = TexelLight(self.scene, self.tm.rows(start, stop), self.occluder, self.rays,
+                          self.samples, self.seed, self.solution_texels.rows(start, stop),
+                          None if self.normals is None else self.normals[sl], self.smooth_read,
+                          self.offset, self.first + start)
+        if self._direct is not None:
+            part._direct = (self._direct[0][sl], self._direct[1][sl])
+        return part
+
+    def release(self):
+        """Forget the light of :meth:`subset` (the exitance fit's sample) once it is done."""
+        self._subset = (None, None)
+
+    def subset(self, rows):
+        """This light on the texels ``rows`` (sorted indices): their own rays (a sample of
+        the map, e.g. the exitance fit's); the direct light already cast is shared."""
+        from .settled import texel_subset
+        key = (len(rows), hash(np.asarray(rows).tobytes()))
+        if self._subset[0] == key:              # the exitance fit asks for it at every round
+            return self._subset[1]
+        mask = np.zeros(self.tm.n_texels, bool)
+        mask[rows] = True
+        tm = texel_subset(self.tm, mask)
+        part = TexelLight(self.scene, tm, self.occluder, self.rays, self.samples, self.seed + 1,
+                          tm if self.solution_texels is self.tm else
+                          texel_subset(self.solution_texels, mask),
+                          None if self.normals is None else self.normals[rows],
+                          self.smooth_read, self.offset)
+        if self._direct is not None:
+            part._direct = (self._direct[0][rows], self._direct[1][rows])
+        self._subset = (key, part)
+        return part
+
     def irradiance(self, sol, scale):
         """(H_occ,k, H_unocc,k) per texel (k, T, 3) with the exitance factors ``scale`` (k,):
         direct by ray casting, indirect interpolated from the solution's leaves."""
         (O, U), (ind_occ, ind_un) = self.parts(sol, scale)
         return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
 
-    def parts(self, sol, scale):
+    def parts(self, sol, scale, leaf=None, unoccluded=True):
         """((direct occluded, direct unoccluded), (indirect occluded, indirect unoccluded)) per
-        texel and lamp, each (k, T, 3): the two terms of :meth:`irradiance`."""
-        Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
+        texel and lamp, each (k, T, 3): the two terms of :meth:`irradiance` (the unoccluded
+        ones None unless ``unoccluded``).  ``leaf``: :func:`leaf_indirect` of ``sol``, when the
+        caller already has it."""
+        occ, un = leaf_indirect(sol) if leaf is None else leaf
         read = self.reader(sol)
-        ind_occ = np.stack([read(o - d) for o, d in zip(Hocc_k, Docc_k)])
-        ind_un = np.stack([read(u - d) for u, d in zip(HU_k, DU_k)])
+        ind_occ = np.stack([read(x) for x in occ])
+        ind_un = np.stack([read(x) for x in un]) if unoccluded else None
         U1, O1 = self.direct()
         s = np.asarray(scale, float)[None, :, None]
-        U, O = np.moveaxis(U1 * s, 1, 0), np.moveaxis(O1 * s, 1, 0)      # (k, T, 3)
+        O = np.moveaxis(O1 * s, 1, 0)                                    # (k, T, 3)
+        U = np.moveaxis(U1 * s, 1, 0) if unoccluded else None
         return (O, U), (ind_occ, ind_un)
+
+    def occluded_luminance(self, sol, scale):
+        """Luminance of each lamp's occluded direct and indirect light per texel, (k, T) each,
+        at the exitance factors ``scale``: what the exitance fit reads, with only the
+        luminance of the direct light kept once cast (a sample of a photo-resolution map)."""
+        if self._direct_luminance is None:
+            O = self._direct[1] if self._direct is not None else self._cast()[1]
+            self._direct_luminance = luminance(O).T                          # (k, T)
+        occ, _ = leaf_indirect(sol, unoccluded=False)
+        read = self.reader(sol)
+        indirect = np.stack([read(luminance(x)) for x in occ])
+        return self._direct_luminance * np.asarray(scale, float)[:, None], indirect
 
     def reader(self, sol):
         """Leaf values -> per-texel values, for the solution's current leaves."""
@@ -88,7 +158,7 @@ class TexelLight:
         return read
 
     def _cast(self):
-        scene, tm = self.scene, self.tm
+        scene, tm, first = self.scene, self.tm, self.first
         T, k = tm.n_texels, scene.n_lamps
         U = np.zeros((T, k, 3))
         O = np.zeros((T, k, 3))
@@ -99,17 +169,19 @@ class TexelLight:
                                for im in parts]) if parts else np.zeros((0, 2))
 
         def chunk(c0):
-            sl = slice(c0, c0 + TEXEL_CHUNK)
+            # chunks start at multiples of TEXEL_CHUNK of the whole map, whatever block this is
+            sl = slice(c0, min(T, c0 + TEXEL_CHUNK - (first + c0) % TEXEL_CHUNK))
             pts, nrm, n_sub = footprint_points(scene, patch[sl], u[sl], v[sl], centre[sl],
                                                size[sl], self.samples)
             # the mean over each texel's footprint (a photo texel integrates it too)
             if self.normals is not None:
                 nrm = np.repeat(self.normals[sl], n_sub, axis=0)
             U[sl], O[sl] = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub],
-                                           self.occluder, self.rays, self.seed + 11 + c0,
-                                           offset=self.offset)
+                                           self.occluder, self.rays,
+                                           self.seed + 11 + first + c0, offset=self.offset)
 
-        starts = range(0, T, TEXEL_CHUNK)
+        starts = [0] + list(range(TEXEL_CHUNK - first % TEXEL_CHUNK, T, TEXEL_CHUNK)) \
+            if T else []
         if len(starts) > 1:
             with ThreadPoolExecutor(2) as pool:
                 list(pool.map(chunk, starts))
@@ -117,6 +189,14 @@ class TexelLight:
             for c0 in starts:
                 chunk(c0)
         return U, O
+
+
+def leaf_indirect(sol, unoccluded=True):
+    """Per lamp (k, L, 3) the indirect irradiance of each leaf, occluded and unoccluded
+    (total minus direct; the latter None unless ``unoccluded``): what the texels read of the
+    solution."""
+    Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
+    return Hocc_k - Docc_k, (HU_k - DU_k if unoccluded else None)
 
 
 def footprint_points(scene, patch, u, v, centre, size, samples):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..radiosity.solver import LeafSystem
-from ..texture.mapping import element_means, texel_elements
+from ..texture.mapping import texel_element_means
 
 
 class Transport:
@@ -80,5 +80,5 @@ def leaf_means(sol, tm, values):
     """Mean of per-texel ``values`` (T, 3) over each leaf of the solution, and the texel counts
     (leaves without texels take their ancestors' means)."""
     h = sol.hierarchy
-    means, counts = element_means(values, texel_elements(h, tm), h.n, hierarchy=h)
+    means, counts = texel_element_means(h, tm, values)
     return means[sol.leaves], counts[sol.leaves]

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..lights import Lights
 from ..radiosity.precompute import lights_on_elements
-from .maps import direct_fraction, fraction_images, map_images, maps_from
-from .transport import Transport
+from .maps import map_images
+from .texel_maps import lamp_maps
 
 
 def _with_lamps(scene, lights: Lights, names):
@@ -89,23 +89,15 @@ def add_lamps(result, lights: Lights, names, seed=0):
     new_sol.light_unocc = np.concatenate([old_unocc, unocc])
     new_sol.emission_scale = np.concatenate([sol.emission_scale, np.full(m, s)])
     # Per texel: direct by ray casting (the new lamps only), indirect from the new bases.
-    tm = result.texel_map
     opt = result.options
     texels_of = result.scene if result.scene is not None else sol.scene
     light = result.texel_light(_only_lights(_with_lamps(texels_of, lights, names)[0], rows),
                                opt.seed + 101)
-    U1, O1 = light.direct()
-    tr = Transport(new_sol)
-    b_new = new_sol.basis[k0:]
-    indirect = tr.per_lamp(tr.occ, b_new) - tr.per_lamp(tr.dir_occ, b_new)  # (m, L, 3)
-    read = light.reader(new_sol)
-    H_new = np.stack([read(x) for x in indirect])
-    H_new = np.maximum(np.moveaxis(O1[:, k0:] * s, 1, 0) + H_new, 0.0)    # (m, T, 3)
-    new_maps, _ = map_images(tm, maps_from(H_new, result.denominator))
+    new_maps, new_direct = lamp_maps(light, new_sol, np.arange(k0, k0 + m), s,
+                                     result.denominator)
     maps = {i: np.concatenate([result.maps[i], new_maps[i]]) for i in result.maps}
     direct = None
     if result.direct is not None:
-        new_direct = fraction_images(tm, direct_fraction(np.moveaxis(O1[:, k0:] * s, 1, 0), H_new))
         direct = {i: np.concatenate([result.direct[i], new_direct[i]]) for i in result.direct}
     est = result.lamps
     lamps = dataclasses.replace(

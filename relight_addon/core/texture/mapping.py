@@ -27,6 +27,10 @@ INSIDE_TOLERANCE = 1e-9
 # Candidate (patch, texel) pairs processed at once (peak ~40 MB of temporaries); besides the
 # outputs, rasterisation keeps ~14 bytes per texel of state.
 CHUNK_PAIRS = 1 << 17
+# An image of more texels than this (a photo-resolution texture, above 1024^2) keeps its texel
+# parameters in float32
+PHOTO_TEXELS = 1 << 20
+
 # Parameter quantisation used to identify shared element corners (params are dyadic).
 _PARAM_QUANTUM = float(1 << 30)
 
@@ -39,9 +43,10 @@ class CoveredTexels:
     """The covered texels of one image.
 
     shape        (H, W)
-    texel_index  (t,) int64    flat texel index ``y * W + x``, increasing
-    patch        (t,) int64    owning patch
-    u, v         (t,) float64  the patch's bilinear parameters at the texel centre
+    texel_index  (t,) int32    flat texel index ``y * W + x``, increasing (int64 past 2**31)
+    patch        (t,) int32    owning patch (the concatenated views of TexelMap are int64)
+    u, v         (t,) float64  the patch's bilinear parameters at the texel centre (float32
+                               in an image of more than PHOTO_TEXELS texels)
     coverage     (H, W) bool   texels owned by some patch
     n_overlap    int           texels claimed by more than one patch (overlapping UVs)
     """
@@ -121,6 +126,17 @@ class TexelMap:
     def image(self):
         """Image index of every texel of the concatenated arrays."""
         return np.repeat(np.arange(len(self.images)), [len(im) for im in self.images])
+
+    def rows(self, start: int, stop: int) -> "TexelMap":
+        """The texels start .. stop - 1 of the concatenated order, as a TexelMap of the same
+        images (views, no copies): a block of a texture too large to work on whole."""
+        images, off = [], self.offsets
+        for i, im in enumerate(self.images):
+            a, b = max(start - off[i], 0), min(stop - off[i], len(im))
+            sl = slice(a, max(a, b))
+            images.append(CoveredTexels(im.shape, im.texel_index[sl], im.patch[sl], im.u[sl],
+                                        im.v[sl], im.coverage))
+        return TexelMap(images)
 
     def gather(self, images) -> np.ndarray:
         """Values (T, C) of the covered texels, read from ``images`` (list of (H, W, C))."""
@@ -323,8 +339,15 @@ def _rasterize_image(uv, ids, h, w, chunk_pairs) -> CoveredTexels:
         uu, vv, _ = _invert(coef, local[sl], x.astype(np.float64), y.astype(np.float64))
         u[sl] = np.clip(uu, 0.0, 1.0)
         v[sl] = np.clip(vv, 0.0, 1.0)
+    # 32-bit indices: a photo-resolution map holds tens of millions of texels; and the
+    # parameters of a photo-resolution image's texels are float32 (1e-4 of a texel's width on
+    # a patch spanning a 2048^2 image), those of smaller images float64
+    small = np.int32 if max(n, int(ids.max(initial=0)) + 1) < 2**31 else np.int64
+    if n > PHOTO_TEXELS:
+        u, v = u.astype(np.float32), v.astype(np.float32)
     return CoveredTexels(
-        shape=(h, w), texel_index=texel_index, patch=np.asarray(ids, np.int64)[local],
+        shape=(h, w), texel_index=texel_index.astype(small),
+        patch=np.asarray(ids, np.int64)[local].astype(small),
         u=u, v=v, coverage=(owner >= 0).reshape(h, w), n_overlap=int(np.count_nonzero(n_hits > 1)))
 
 
@@ -452,6 +475,34 @@ def element_means(values, element_ids, n_elements, hierarchy=None):
     counts = np.bincount(element_ids, minlength=n_elements).astype(np.float64)
     sums = np.stack([np.bincount(element_ids, weights=values2[:, j], minlength=n_elements)
                      for j in range(values2.shape[1])], axis=-1)
+    return _means(sums, counts, n_elements, hierarchy, values.shape[1:])
+
+
+# texels located in the hierarchy at once by texel_element_means: bounded working memory
+MEANS_BLOCK = 1 << 20
+
+
+def texel_element_means(hierarchy, texel_map: TexelMap, values):
+    """:func:`element_means` (with the hierarchy) of per-texel ``values`` (T, C) over the
+    elements the texels of ``texel_map`` fall in, located block by block (a photo-resolution
+    map's element ids are never held whole)."""
+    T, n = texel_map.n_texels, hierarchy.n
+    if T <= MEANS_BLOCK:
+        return element_means(values, texel_elements(hierarchy, texel_map), n, hierarchy)
+    C = int(np.prod(np.shape(values)[1:]))
+    counts = np.zeros(n)
+    sums = np.zeros((n, C))
+    for start in range(0, T, MEANS_BLOCK):
+        stop = min(T, start + MEANS_BLOCK)
+        ids = texel_elements(hierarchy, texel_map.rows(start, stop))
+        part = np.asarray(values[start:stop], np.float64).reshape(stop - start, C)
+        counts += np.bincount(ids, minlength=n)
+        for j in range(C):
+            sums[:, j] += np.bincount(ids, weights=part[:, j], minlength=n)
+    return _means(sums, counts, n, hierarchy, np.shape(values)[1:])
+
+
+def _means(sums, counts, n_elements, hierarchy, shape):
     if hierarchy is not None:
         sums, counts = _pull_up_sums(hierarchy, sums, counts)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -459,7 +510,7 @@ def element_means(values, element_ids, n_elements, hierarchy=None):
     means[counts == 0] = np.nan
     if hierarchy is not None:
         means = _push_down_missing(hierarchy, means, counts)
-    return means.reshape((n_elements,) + values.shape[1:]), counts.astype(np.int64)
+    return means.reshape((n_elements,) + tuple(shape)), counts.astype(np.int64)
 
 
 def pull_up_means(hierarchy, means, counts):
@@ -577,6 +628,8 @@ class CornerInterpolation:
     """Per-texel values (T, C) bilinear in their leaf's four corner values (n_leaves, 4, C):
     the texels' leaves and parameters found once, for any number of value sets."""
 
+    CHUNK = 1 << 16        # texels interpolated at once
+
     def __init__(self, hierarchy, texel_map: TexelMap, element_ids=None):
         leaves = hierarchy.leaves()
         if element_ids is None:
@@ -594,9 +647,13 @@ class CornerInterpolation:
 
     def __call__(self, corner_values):
         cv = np.asarray(corner_values, np.float64)
-        cv2 = cv.reshape(cv.shape[0], 4, -1)[self.leaf]
-        out = sum(w * cv2[:, i] for i, w in enumerate(self.weights))
-        return out.reshape((len(out),) + cv.shape[2:])
+        cv = cv.reshape(cv.shape[0], 4, -1)
+        out = np.empty((len(self.leaf), cv.shape[2]))
+        for c0 in range(0, len(out), self.CHUNK):      # no (T, 4, C) copy of the corners
+            sl = slice(c0, c0 + self.CHUNK)
+            cv2 = cv[self.leaf[sl]]
+            out[sl] = sum(w[sl] * cv2[:, i] for i, w in enumerate(self.weights))
+        return out.reshape((len(out),) + np.shape(corner_values)[2:])
 
 
 def interpolate_corner_values(hierarchy, corner_values, texel_map: TexelMap, element_ids=None):
@@ -692,10 +749,13 @@ def _neighbour_sum_numpy(a):
 # Neighbours and means
 # ------------------------------------------------------------------------------------------
 
-def adjacent_texel_pairs(texel_map: TexelMap) -> np.ndarray:
-    """Index pairs (into the concatenated texel arrays) of 4-adjacent covered texels."""
+def adjacent_texel_pairs(texel_map: TexelMap, fraction: float = 1.0, seed: int = 0) -> np.ndarray:
+    """Index pairs (into the concatenated texel arrays) of 4-adjacent covered texels.  With
+    ``fraction`` < 1, each pair is kept with that probability (seeded), image by image, so
+    that a photo-resolution map's whole list is never held."""
     out = []
     off = texel_map.offsets
+    rng = np.random.default_rng(seed)
     for i, im in enumerate(texel_map.images):
         if len(im) == 0:
             continue
@@ -706,8 +766,20 @@ def adjacent_texel_pairs(texel_map: TexelMap) -> np.ndarray:
         for a, b in ((grid[:, :-1], grid[:, 1:]), (grid[:-1, :], grid[1:, :])):
             a, b = a.ravel(), b.ravel()
             ok = (a >= 0) & (b >= 0)
+            if fraction < 1.0:
+                ok &= rng.random(len(ok)) < fraction
             out.append(np.stack([a[ok], b[ok]], 1))
     return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
+
+
+def count_adjacent_texel_pairs(texel_map: TexelMap) -> int:
+    """How many pairs :func:`adjacent_texel_pairs` lists (from the coverage masks)."""
+    n = 0
+    for im in texel_map.images:
+        if len(im):
+            c = im.coverage
+            n += int(np.count_nonzero(c[:, :-1] & c[:, 1:]) + np.count_nonzero(c[:-1] & c[1:]))
+    return n
 
 
 def neighbour_element_pairs(texel_map: TexelMap, element_ids) -> np.ndarray:
@@ -723,7 +795,17 @@ def neighbour_element_pairs(texel_map: TexelMap, element_ids) -> np.ndarray:
 
 def patch_means(texel_map: TexelMap, values, n_patches: int):
     """Mean texel value (p, 3) and texel count (p,) of every patch."""
-    patch = texel_map.patch
-    cnt = np.bincount(patch, minlength=n_patches)
-    means = np.stack([np.bincount(patch, values[:, c], n_patches) for c in range(3)], axis=1)
-    return means / np.maximum(cnt, 1)[:, None], cnt
+    if texel_map.n_texels <= MEANS_BLOCK:
+        patch = texel_map.patch
+        cnt = np.bincount(patch, minlength=n_patches)
+        means = np.stack([np.bincount(patch, values[:, c], n_patches) for c in range(3)], 1)
+        return means / np.maximum(cnt, 1)[:, None], cnt
+    cnt = np.zeros(n_patches, np.int64)
+    sums = np.zeros((n_patches, 3))
+    off = texel_map.offsets
+    for i, im in enumerate(texel_map.images):     # image by image: no whole-map copies
+        vals = values[off[i]:off[i + 1]]
+        cnt += np.bincount(im.patch, minlength=n_patches)
+        for c in range(3):
+            sums[:, c] += np.bincount(im.patch, vals[:, c], n_patches)
+    return sums / np.maximum(cnt, 1)[:, None], cnt
