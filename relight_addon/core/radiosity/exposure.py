@@ -20,7 +20,8 @@ Texels still read the leaf's mean irradiance: read as H / a, the few straddling 
 followed (family room 5: rho^ 0.435 -> 0.406, lamp off 0.54 -> 0.66 CIEDE2000).  A leaf that
 gathers at its centre only (far from all its sources; every leaf at draft) is exposed or not by
 that point (a = 1 or 0).  A leaf buried whole (a = 0) is no source: a ray that lands on a part
-of it out in the open sees its nearest ancestor with an exposed part (LeafSystem.set_exposure);
+of it out in the open sees its nearest ancestor with an exposed part (LeafSystem.set_exposure),
+and a texel on it reads that ancestor's exposed mean (read_in_the_open);
 before, such leaves kept a = 1 and counted dark (clutter furnace, box on the floor, high, rho
 0.9: 0.9 % -> 0.3 %).  Draft (one point per leaf, m = 1) keeps a = 1 everywhere: there a floor
 leaf whose centre a box covers is mostly open, and taking it out as a source made every face
@@ -31,6 +32,7 @@ its photographed open part reads no light in the model, and one point cannot tel
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import cosine_directions, quadrature
@@ -83,3 +85,36 @@ def _buried(pts, n, occluder, patch_of, patch_normal, eps, rng):
                                 D.reshape(-1, 3)) > 0)
         buried[c0:c1] = back.reshape(c1 - c0, mm, R).all(axis=2)
     return buried
+
+
+def read_in_the_open(h, leaves, exposure, leaf_area):
+    """A function of leaf values (L, ...) giving them back with every leaf buried whole
+    (exposure 0) at the exposed-area mean of its nearest ancestor with an exposed part; None
+    when no leaf is buried.  For texels: a texel whose centre lies on such a leaf is
+    photographed, so part of its footprint is out in the open, lit as the open surface around
+    it, while the leaf itself reads no light in the model (a table leg's foot on the office
+    floor: four texels relit black with contact lines on)."""
+    buried = np.flatnonzero(np.asarray(exposure) <= 0)
+    if not len(buried):
+        return None
+    pos, anc = h.ancestor_pairs(leaves)
+    w = leaf_area[pos] * exposure[pos]
+    A = sp.csr_matrix((w, (anc, pos)), shape=(h.n, len(leaves)))
+    exposed = np.asarray(A.sum(axis=1)).ravel()
+    area = np.bincount(anc, leaf_area[pos], h.n)
+    up = leaves[buried].copy()
+    for _ in range(int(h.level[: h.n].max(initial=0)) + 1):
+        move = (up >= 0) & (exposed[np.maximum(up, 0)] <= 1e-9 * area[np.maximum(up, 0)])
+        if not move.any():
+            break
+        up[move] = h.parent[up[move]]
+    ok = up >= 0
+    rows, anc_ok = buried[ok], up[ok]
+    R = sp.diags(1.0 / exposed[anc_ok]) @ A[anc_ok]
+
+    def read(values):
+        v = np.array(values, float)
+        flat = v.reshape(len(v), -1)
+        flat[rows] = R @ flat
+        return v
+    return read

@@ -23,6 +23,7 @@ import numpy as np
 from ..scene import bilinear_point
 from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
                                uv_patch_is_triangle, vertex_interpolate)
+from ..radiosity.exposure import read_in_the_open
 from ..texture.colour import luminance
 from .direct import lamp_irradiance
 from .transport import Transport
@@ -154,6 +155,14 @@ class TexelLight:
 
             def read(values):
                 return vertex_interpolate(sol.hierarchy, values, stm, interpolation=interpolation)
+        system = sol.system
+        in_the_open = read_in_the_open(sol.hierarchy, sol.leaves, system.exposure,
+                                       system.leaf_area)
+        if in_the_open is not None:
+            read_leaves = read
+
+            def read(values):
+                return read_leaves(in_the_open(values))
         self._reader = (key, read)
         return read
 
