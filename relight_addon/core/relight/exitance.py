@@ -325,6 +325,19 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # the element-level indirect light does not resolve) wanted g = 0.2-0.4 where most pieces
 # wanted 1.7-2.5, pulled rho^ to 0.29 (true area mean 0.47) and biased every lamp ratio (the
 # weakest lamp by +43 %).
+# The shadow-edge fit reads at most this many neighbouring texel pairs (every pair of the
+# family's rooms, up to 512 texels a wall: ~0.9 M; the office at 1.17 M texels has 2.3 M, and
+# its Nelder-Mead took 25 of the precompute's 46 s on all of them)
+EDGE_PAIRS = 1_000_000
+PAIRS_WHOLE = 8_000_000          # more pairs than this (~4 M texels) are not listed whole
+VOTE_CELLS = 4
+VOTE_CELL_TEXELS = 32
+VOTE_STEP = 2                                 # grid steps (0.25 in log g)
+VOTE_MIN_PAIRS = 200
+VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
+VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
+
+
 def edge_pairs(tm, photo):
     """The neighbouring texel pairs (n, 2) the shadow-edge fit reads, both lit in the photo (at
     most EDGE_PAIRS of them, a seeded sample), and the photo's log luminance difference over
@@ -343,19 +356,6 @@ def edge_pairs(tm, photo):
         pick = np.sort(np.random.default_rng(11).choice(len(pairs), EDGE_PAIRS, replace=False))
         pairs, lum = pairs[pick], lum[pick]
     return pairs, np.log(lum[:, 0]) - np.log(lum[:, 1])
-
-
-# The shadow-edge fit reads at most this many neighbouring texel pairs (every pair of the
-# family's rooms, up to 512 texels a wall: ~0.9 M; the office at 1.17 M texels has 2.3 M, and
-# its Nelder-Mead took 25 of the precompute's 46 s on all of them)
-EDGE_PAIRS = 1_000_000
-PAIRS_WHOLE = 8_000_000          # more pairs than this (~4 M texels) are not listed whole
-VOTE_CELLS = 4
-VOTE_CELL_TEXELS = 32
-VOTE_STEP = 2                                 # grid steps (0.25 in log g)
-VOTE_MIN_PAIRS = 200
-VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
-VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
 
 
 def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):

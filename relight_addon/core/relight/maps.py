@@ -71,8 +71,8 @@ def map_images(tm, maps, seam_pixels=SEAM_PIXELS):
         for j in range(k):
             full = np.zeros((hh * ww, 3), np.float32)
             full[im.texel_index] = maps[j][sl]
-            m[j], _ = dilate_seams(full.reshape(hh, ww, 3), im.coverage, seam_pixels)
-        mp[i] = np.nan_to_num(m)
+            m[j] = dilated(full.reshape(hh, ww, 3), im.coverage, seam_pixels)
+        mp[i] = m
         cov[i] = im.coverage.copy()
     return mp, cov
 
@@ -86,13 +86,6 @@ def direct_fraction(direct_k, Hocc_k):
     return np.clip(np.where(h > 0, d / np.where(h > 0, h, 1.0), 1.0), 0.0, 1.0)
 
 
-def fraction_images(tm, fraction, seam_pixels=SEAM_PIXELS):
-    """Per-texel fractions (k, T) -> {image index: (k, H, W) float32}, dilated like the maps."""
-    mp, _ = map_images(tm, np.repeat(np.asarray(fraction, np.float32)[..., None], 3, axis=-1),
-                       seam_pixels)
-    return {i: m[..., 0].copy() for i, m in mp.items()}
-
-
 def texture_images(tm, t_final, images):
     """T_final per image: the original texels (``images``, the scene's photographs) outside the
     covered ones, dilated across seams."""
@@ -104,6 +97,11 @@ def texture_images(tm, t_final, images):
         hh, ww = im.shape
         base = texels_of(images[i]).reshape(hh * ww, 3).copy()
         base[im.texel_index] = t_final[off[i]:off[i + 1]]
-        t_img, _ = dilate_seams(base.reshape(hh, ww, 3), im.coverage, SEAM_PIXELS)
-        tex[i] = np.nan_to_num(t_img).astype(np.float32)
+        tex[i] = dilated(base.reshape(hh, ww, 3), im.coverage).astype(np.float32)
     return tex
+
+
+def dilated(image, coverage, pixels=SEAM_PIXELS):
+    """``image`` with its seams dilated ``pixels`` rings deep (dilate_seams), NaN and Inf
+    replaced by finite values."""
+    return np.nan_to_num(dilate_seams(image, coverage, pixels)[0])

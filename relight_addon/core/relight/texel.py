@@ -20,11 +20,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..radiosity.exposure import read_in_the_open
 from ..scene import bilinear_point
+from ..texture.colour import luminance
 from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
                                uv_patch_is_triangle, vertex_interpolate)
-from ..radiosity.exposure import read_in_the_open
-from ..texture.colour import luminance
 from .direct import lamp_irradiance
 from .transport import Transport
 
@@ -104,17 +104,11 @@ class TexelLight:
         self._subset = (key, part)
         return part
 
-    def irradiance(self, sol, scale):
-        """(H_occ,k, H_unocc,k) per texel (k, T, 3) with the exitance factors ``scale`` (k,):
-        direct by ray casting, indirect interpolated from the solution's leaves."""
-        (O, U), (ind_occ, ind_un) = self.parts(sol, scale)
-        return np.maximum(O + ind_occ, 0.0), np.maximum(U + ind_un, 0.0)
-
     def parts(self, sol, scale, leaf=None, unoccluded=True):
         """((direct occluded, direct unoccluded), (indirect occluded, indirect unoccluded)) per
-        texel and lamp, each (k, T, 3): the two terms of :meth:`irradiance` (the unoccluded
-        ones None unless ``unoccluded``).  ``leaf``: :func:`leaf_indirect` of ``sol``, when the
-        caller already has it."""
+        texel and lamp, each (k, T, 3): the direct and indirect terms of the irradiance (the
+        unoccluded ones None unless ``unoccluded``).  ``leaf``: :func:`leaf_indirect` of
+        ``sol``, when the caller already has it."""
         occ, un = leaf_indirect(sol) if leaf is None else leaf
         read = self.reader(sol)
         ind_occ = np.stack([read(x) for x in occ])

@@ -20,8 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..texture.mapping import dilate_seams
-from .maps import DISPLAY_EPS, SEAM_PIXELS, clipped_ratio, direct_fraction, texels_of
+from .maps import DISPLAY_EPS, clipped_ratio, dilated, direct_fraction, texels_of
 from . import texel
 from .texel import leaf_indirect
 from .transport import Transport, as_given
@@ -63,7 +62,7 @@ def texel_maps(light, sol, scale, scene, images, block=None) -> TexelMaps:
     out.finish(denominator)
     for i in out.used:
         im = tm.images[i]
-        texture[i] = np.nan_to_num(dilate_seams(texture[i], im.coverage, SEAM_PIXELS)[0])
+        texture[i] = dilated(texture[i], im.coverage)
     return TexelMaps(texture, out.maps, out.coverage, out.direct, denominator)
 
 
@@ -160,8 +159,6 @@ class _Images:
             for c in range(3):
                 flat[:, im.texel_index[dark[:, c]], c] = 0.0
             for j in range(k):
-                self.maps[i][j] = np.nan_to_num(dilate_seams(self.maps[i][j], im.coverage,
-                                                             SEAM_PIXELS)[0])
-                self.direct[i][j] = np.nan_to_num(dilate_seams(self.direct[i][j], im.coverage,
-                                                               SEAM_PIXELS)[0])
+                self.maps[i][j] = dilated(self.maps[i][j], im.coverage)
+                self.direct[i][j] = dilated(self.direct[i][j], im.coverage)
             self.coverage[i] = im.coverage.copy()
