@@ -191,6 +191,7 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
         "photo_sigma": [finite(x, -1.0) for x in est.uncertainty],
         "photo_used": [bool(x) for x in est.applied],
         "rho_mean": finite(est.rho_mean, -1.0),
+        "rho_sigma": finite(getattr(est, "rho_sigma", float("inf")), -1.0),
         # a dense mesh solved on a decimated proxy: its faces and how far the mesh is from it
         "proxy_faces": int(stats.get("proxy_faces", 0)),
         "input_faces": int(stats.get("input_faces", 0)),

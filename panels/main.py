@@ -39,7 +39,10 @@ def status_lines(scene):
     if math.isfinite(st.get("misfit", float("nan"))):
         lines.append((f"Model vs photo: {100 * st['misfit']:.1f} % RMS", 'INFO'))
     if st.get("rho_mean", -1) > 0:
-        lines.append((f"Mean reflectance (from the shadows' depth): {st['rho_mean']:.2f}", 'INFO'))
+        rho, sigma = st["rho_mean"], st.get("rho_sigma", -1)
+        lines.append((f"Mean reflectance (from the shadows' depth): {rho:.2f} "
+                      f"\u00b1 {rho * sigma:.2f}" if sigma >= 0 else
+                      f"Mean reflectance: {rho:.2f} (the photo's shadows do not tell it)", 'INFO'))
     n = len(st["lamps"])
     for j, name in enumerate(st["lamps"]):
         obj = bpy.data.objects.get(name)

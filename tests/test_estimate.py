@@ -136,9 +136,27 @@ def test_the_indirect_weight_is_voted_by_the_surfaces_not_by_the_steepest():
         w = np.exp(lg)
         return np.abs(dl - np.log(D[a] + w * I[a]) + np.log(D[b] + w * I[b])).sum()
     g_pooled = float(np.exp(minimize_scalar(pooled, bounds=(-3, 3), method="bounded").x))
-    g_vote = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+    g_vote, _ = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
     assert g_pooled < 1.5                                  # the pooled fit is dragged down
     assert abs(np.log(g_vote / 2.0)) < 0.13, g_vote         # the vote: within a grid step
     # without the bad pieces both agree
     tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(3), 2.0, 2.0)
-    assert abs(np.log(_vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch)) / 2.0)) < 0.13
+    assert abs(np.log(_vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[0] / 2.0)) < 0.13
+
+
+def test_the_vote_says_how_sure_it_is():
+    """The vote's standard error (a bootstrap over the pieces) is small where shadows of one
+    depth are on every piece, large where the pieces disagree (half of them with shadows 4
+    times as deep as the others': what the model does not explain), and infinite where too few
+    pieces vote: then rho^ stays at the user's first guess (exitance._fit_rho_mean)."""
+    from relight_addon.core.relight.exitance import _vote_g
+    for seed in range(5):
+        tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 2.0)
+        g, sigma = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+        assert abs(np.log(g / 2.0)) < 0.13 and sigma < 0.1, (seed, g, sigma)
+        tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 0.5, n_contact=6)
+        g, sigma = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+        assert sigma > 0.3, (seed, g, sigma)
+        tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 2.0, n_pieces=4,
+                                         n_contact=0, side=32)
+        assert _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[1] == np.inf

@@ -23,11 +23,9 @@ that point (a = 1 or 0).  A leaf buried whole (a = 0) is no source: a ray that l
 of it out in the open sees its nearest ancestor with an exposed part (LeafSystem.set_exposure),
 and a texel on it reads that ancestor's exposed mean (read_in_the_open);
 before, such leaves kept a = 1 and counted dark (clutter furnace, box on the floor, high, rho
-0.9: 0.9 % -> 0.3 %).  Draft (one point per leaf, m = 1) keeps a = 1 everywhere: there a floor
-leaf whose centre a box covers is mostly open, and taking it out as a source made every face
-of the furnace exact at rho 0.99 (8 % low with it), but the lamp fit on the test suite's room
-of random photos then flipped with a photo edit (lamp factor 0.7 -> 3.2, rho^ 0.5 -> 0.35):
-its photographed open part reads no light in the model, and one point cannot tell it apart.
+0.9: 0.9 % -> 0.3 %).  At draft (one point per leaf, m = 1) every leaf is decided by its
+centre: a floor leaf whose centre a box covers is no source (the clutter furnace at rho 0.99:
+8 % low before, exact now), and its photographed open part is read in the open.
 """
 from __future__ import annotations
 
@@ -43,13 +41,13 @@ BURIED_RAYS = 8         # per quadrature point
 def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     """Exposure (L,) in [0, 1] of each leaf (see the module docstring).  ``near`` (h.n,) bool:
     the leaves that gather on their m x m quadrature points (links.final_form_factors), the
-    others gather at their centre, which decides for them (0 or 1).  With m = 1 (draft) every
-    leaf keeps 1: see the module docstring.  ``occluder`` knows the patch of each of its
+    others gather at their centre, which decides for them (0 or 1; every leaf at draft, m = 1).
+    ``occluder`` knows the patch of each of its
     triangles (``patch_of_triangle``)."""
     L = len(leaves)
     a = np.ones(L)
     patch_of = getattr(occluder, "patch_of_triangle", None) if occluder is not None else None
-    if L == 0 or patch_of is None or m <= 1:
+    if L == 0 or patch_of is None:
         return a
     patch_of = np.asarray(patch_of)
     _, patch_normal = scene.area_normal()

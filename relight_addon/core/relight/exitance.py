@@ -72,6 +72,9 @@ class LampEstimate:
     nnls: np.ndarray
     method: str
     rho_mean: float = float("nan")     # rho^, the mean reflectance used (fitted or given)
+    # rho^'s relative 1-sigma uncertainty (the vote's bootstrap); inf where the photo's shadows
+    # do not tell it (fewer than VOTE_MIN_PIECES pieces vote) and rho^ stays the first guess
+    rho_sigma: float = float("inf")
 
 
 # The photo's ratio replaces the user's (mode "user") only when it is pinned down: its
@@ -92,6 +95,9 @@ JACKKNIFE_FOLDS = 8
 # rho^ is kept in.
 INDIRECT_ROUNDS = 4
 RHO_MEAN_RANGE = (0.05, 0.9)
+# How fast log g falls as log rho^ rises (measured on the family's tuning rooms): sizes the
+# secant search's first step and turns the vote's uncertainty into rho^'s.
+G_PER_RHO = 2.7
 
 
 def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
@@ -126,7 +132,7 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
     ratio = np.where(on, 1.0, np.nan)
     sigma = np.where(on, 0.0 if on.sum() == 1 else np.inf, np.nan)
     applied = np.zeros(k, bool)
-    rho_mean = opt.rho_mean
+    rho_mean, rho_sigma = opt.rho_mean, np.inf
     if opt.exitance == "nnls" and np.any(nnls_k > 0):
         scale = rounds(nnls_k.copy(), rho_mean)
     elif opt.exitance == "equal":
@@ -134,8 +140,8 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
     else:
         scale = rounds(np.ones(k), rho_mean)
         if opt.fit_indirect and tm.n_texels:
-            rho_mean, scale = _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean,
-                                            rounds)
+            rho_mean, scale, rho_sigma = _fit_rho_mean(sol, tm, photo, scale, texel_light,
+                                                       on, rho_mean, rounds)
         fit = edge_fit(sol, tm, photo, scale, texel_light, on, folds=JACKKNIFE_FOLDS,
                        indirect=False)
         if on.sum() >= 2 and tm.n_texels:
@@ -158,19 +164,28 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
                 base = np.exp(np.mean(np.log(ratio[keep]))) if keep.any() else 1.0
                 scale[use] = scale[use] * ratio[use] / base
                 scale = rounds(scale, rho_mean)
-    return LampEstimate(scale, ratio, sigma, applied, eq_k, nnls_k, opt.exitance, rho_mean)
+    return LampEstimate(scale, ratio, sigma, applied, eq_k, nnls_k, opt.exitance, rho_mean,
+                        rho_sigma)
 
 
 def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
     """rho^ such that the shadow-edge fit wants no more and no less indirect light (g = 1): a
     secant search on log rho^ against log g, from the first guess, at most INDIRECT_ROUNDS
     fits after the first.  log g falls about 2.7 times as fast as log rho^ rises (measured on
-    the family's tuning rooms), which sizes the first step.  Returns (rho^, scale)."""
+    the family's tuning rooms: G_PER_RHO), which sizes the first step.  Returns (rho^, scale,
+    rho^'s relative uncertainty: inf, and rho^ unmoved, where too few pieces vote)."""
     lo, hi = np.log(RHO_MEAN_RANGE[0]), np.log(RHO_MEAN_RANGE[1])
     x = np.log(rho_mean)
-    f = np.log(edge_fit(sol, tm, photo, scale, texel_light, on).g)
+    first = edge_fit(sol, tm, photo, scale, texel_light, on)
+    f = np.log(first.g)
+    if not np.isfinite(first.sigma_vote):
+        # too few pieces vote: the photo does not show its shadows' depth (the test suite's
+        # room of random textures, where the pooled fit's g moved rho^ 0.50 -> 0.35 and the
+        # lamp factor 0.65 -> 3.2 with a photo edit on one wall)
+        return rho_mean, scale, np.inf
+    rho_sigma = first.sigma_vote / G_PER_RHO
     best = (abs(f), x, scale.copy())
-    slope = -2.7
+    slope = -G_PER_RHO
     for _ in range(INDIRECT_ROUNDS):
         if abs(f) < 0.01:
             break
@@ -178,7 +193,11 @@ def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
         if x_new == x:
             break
         scale = rounds(scale, float(np.exp(x_new)))
-        f_new = np.log(edge_fit(sol, tm, photo, scale, texel_light, on).g)
+        fit = edge_fit(sol, tm, photo, scale, texel_light, on)
+        if not np.isfinite(fit.sigma_vote):     # too few pieces vote here: back to the best
+            x = x_new
+            break
+        f_new = np.log(fit.g)
         if f_new != f:
             slope = float(np.clip((f_new - f) / (x_new - x), -20.0, -0.5))
         x, f = x_new, f_new
@@ -187,7 +206,7 @@ def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
     if best[1] != x:                  # the last step was not the best: go back to it
         scale = rounds(best[2], float(np.exp(best[1])))
         x = best[1]
-    return float(np.exp(x)), scale
+    return float(np.exp(x)), scale, rho_sigma
 
 
 def _equal_factors(scene, est, use_patch):
@@ -214,13 +233,14 @@ class EdgeFit:
     """The shadow-edge fit: lamp ratios ``t`` (geometric mean 1 over the lamps on) and the
     weight ``g`` of the indirect light against the direct, with the jackknife standard errors
     of their logarithms (inf when there are too few surfaces to tell; sigma_g is the pooled
-    fit's, g the surfaces' vote), and each lamp's share of the direct light on the
-    photographed texels."""
+    fit's jackknife, sigma_vote the vote's bootstrap: g is the surfaces' vote), and each
+    lamp's share of the direct light on the photographed texels."""
     t: np.ndarray
     g: float
     sigma_t: np.ndarray
     sigma_g: float
     share: np.ndarray
+    sigma_vote: float = np.inf      # the vote's (g's) standard error in log, bootstrap
 
 
 def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> EdgeFit:
@@ -292,17 +312,18 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 
     full = solve(None)
     t, g = np.exp(full[:k]), float(np.exp(full[k]))
+    sigma_vote = np.inf
     if indirect:          # the surfaces' vote at the current ratios (VOTE_*), not the pooled fit
-        g = _vote_g(D.sum(axis=0), I.sum(axis=0), dlog_t, light.solution_texels, a, b,
-                    np.bincount(tm.patch), fallback=g)
+        g, sigma_vote = _vote_g(D.sum(axis=0), I.sum(axis=0), dlog_t, light.solution_texels,
+                                a, b, np.bincount(tm.patch), fallback=g)
     if folds <= 1:
-        return EdgeFit(t, g, np.zeros(k), 0.0, share)
+        return EdgeFit(t, g, np.zeros(k), 0.0, share, sigma_vote)
     # Jackknife over groups of surfaces (patch groups, dealt into folds by texel count): a
     # value that only some surfaces support is not pinned down.
     group = np.asarray(sol.scene.group)[light.solution_texels.patch[a]]
     ids, counts = np.unique(group, return_counts=True)
     if len(ids) < 3:
-        return EdgeFit(t, g, np.full(k, np.inf), np.inf, share)
+        return EdgeFit(t, g, np.full(k, np.inf), np.inf, share, sigma_vote)
     fold_of = np.zeros(int(ids.max()) + 1, np.int64)
     load = np.zeros(min(folds, len(ids)))
     for gid, c in sorted(zip(ids, counts), key=lambda x: -x[1]):
@@ -313,7 +334,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     n = len(load)
     loo = np.array([solve(fold == f) for f in range(n)])
     sigma = np.sqrt((n - 1) / n * ((loo - loo.mean(axis=0)) ** 2).sum(axis=0))
-    return EdgeFit(t, g, sigma[:k], float(sigma[k]), share)
+    return EdgeFit(t, g, sigma[:k], float(sigma[k]), share, sigma_vote)
 
 
 # The indirect weight g is voted on by pieces of surface (a patch, or a cell of it: large
@@ -336,6 +357,8 @@ VOTE_STEP = 2                                 # grid steps (0.25 in log g)
 VOTE_MIN_PAIRS = 200
 VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
 VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
+VOTE_MIN_PIECES = 5
+VOTE_BOOTSTRAP = 400
 
 
 def edge_pairs(tm, photo):
@@ -359,7 +382,9 @@ def edge_pairs(tm, photo):
 
 
 def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
-    """The voted indirect weight (``fallback`` where no piece votes) over the pairs of texels
+    """The voted indirect weight (``fallback`` where no piece votes) and the standard error of
+    its logarithm (bootstrap over the pieces, at least half a grid step; inf with fewer than
+    VOTE_MIN_PIECES voting pieces) over the pairs of texels
     (a, b) of ``tm``.  D, I (T,): direct and indirect irradiance at the current ratios; dlog_t:
     the photo's log difference over each pair; ``per_patch``: each patch's texels in the whole
     map (``tm`` may be a sample of it)."""
@@ -393,14 +418,23 @@ def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
     # a minimum at the grid's edge is no minimum: the piece cannot tell
     voting = (counts >= VOTE_MIN_PAIRS) & (best > 0) & (best < m - 1) & (info > 0)
     if not voting.any():
-        return fallback
+        return fallback, np.inf
     lg = VOTE_GRID[best]
     # no piece weighs more than the typical one: the steepest pieces are where the model is
     # most often wrong (contact shadows), and would decide alone
     w = np.minimum(info[voting], np.median(info[voting]))
     order = np.argsort(lg[voting])
-    cum = np.cumsum(w[order])
-    return float(np.exp(lg[voting][order][np.searchsorted(cum, 0.5 * cum[-1])]))
+    votes, w = lg[voting][order], w[order]
+    cum = np.cumsum(w)
+    g = float(np.exp(votes[np.searchsorted(cum, 0.5 * cum[-1])]))
+    if len(votes) < VOTE_MIN_PIECES:
+        return g, np.inf
+    # how sure: the spread of the weighted median when the pieces are drawn again (seeded)
+    draws = np.random.default_rng(5).multinomial(len(votes), np.full(len(votes), 1 / len(votes)),
+                                                  size=VOTE_BOOTSTRAP) * w
+    cum = np.cumsum(draws, axis=1)
+    medians = votes[np.argmax(cum >= 0.5 * cum[:, -1:], axis=1)]
+    return g, max(float(medians.std()), 0.5 * (VOTE_GRID[1] - VOTE_GRID[0]))   # the grid's step
 
 
 def nnls_factors(sol, tm, photo, use_patch, current=None):
