@@ -1,5 +1,7 @@
 """Faces turned to their photographed side, and faces lit on both sides (core/relight/orient.py),
 against the same scene modelled the right way round."""
+import dataclasses
+
 import numpy as np
 
 from relight_addon.core.geometry.raycast import make_occluder
@@ -57,6 +59,10 @@ def test_a_panel_lit_from_both_sides_gets_a_back():
     _, nrm = o.scene.area_normal()
     np.testing.assert_allclose(nrm[back], -nrm[panel])
     assert not o.scene.occluder[back] and o.scene.image is None or o.scene.image[back] < 0
+    # every per-patch array covers the back (``virtual`` did not: a copy of the scene failed)
+    for name in ("rho", "emission", "lamp", "occluder", "group", "virtual"):
+        assert len(getattr(o.scene, name)) == o.scene.n_patches, name
+    assert dataclasses.replace(o.scene).n_patches == o.scene.n_patches
     # the back reflects lamp B's light (at x = 3): its radiosity is far from zero
     sol = solve_radiosity(o.scene, "draft", seed=2)
     B = sol.patch_radiosity()

@@ -158,6 +158,7 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     new.lamp = np.concatenate([scene.lamp, np.full(b, -1, scene.lamp.dtype)])
     new.occluder = np.concatenate([scene.occluder, np.zeros(b, bool)])   # the front blocks
     new.group = np.concatenate([scene.group, scene.group[back_of]])
+    new.virtual = np.concatenate([scene.virtual, scene.virtual[back_of]])
     if uv is not None:
         new.uv = np.concatenate([uv, _reverse(uv[back_of])])
     if scene.image is not None:
