@@ -185,6 +185,28 @@ def clutter_furnace(rho=0.9, touching=False) -> SceneData:
     return SceneData(np.concatenate(parts), rho, 1.0, 0, ["all"])
 
 
+def blinds_room(slats=6, gap=0.01) -> SceneData:
+    """A closed 1 m room (rho 0.7) lit by a square lamp under its ceiling, with venetian blinds
+    in the middle: ``slats`` single quads 40 cm square, ``gap`` apart, slightly tilted, each
+    two-sided as orient makes it (core/relight/orient.py: a back copy, reversed, that blocks no
+    ray).  Patch order: the room's 6 faces, the slats, their backs, the lamp."""
+    room = flip(quads_from_boxes([0.5, 0.5, 0.5], [1, 1, 1]))
+    fronts = np.array([[[0.3, 0.3, z], [0.7, 0.3, z], [0.7, 0.7, z + 0.008], [0.3, 0.7, z + 0.008]]
+                       for z in 0.4 + gap * np.arange(slats)])
+    lamp = np.array([[[0.4, 0.4, 0.99], [0.4, 0.6, 0.99], [0.6, 0.6, 0.99], [0.6, 0.4, 0.99]]])
+    corners = np.concatenate([room, fronts, fronts[:, ::-1], lamp])
+    p = len(corners)
+    rho = np.full((p, 3), 0.7)
+    rho[-1] = 0.0
+    emission = np.zeros((p, 3))
+    emission[-1] = 10.0
+    lamp_of = np.full(p, -1)
+    lamp_of[-1] = 0
+    occluder = np.ones(p, bool)
+    occluder[len(room) + slats:len(room) + 2 * slats] = False
+    return SceneData(corners, rho, emission, lamp_of, ["lamp"], occluder=occluder)
+
+
 def parallel_squares(distance: float = 1.0, blocker: bool = False, blocker_size: float = 0.5,
                      receiver_rho=0.5, emitter_exitance=1.0) -> SceneData:
     """Unit emitter square ``[0,1]^2`` at ``z = distance`` facing DOWN (exitance

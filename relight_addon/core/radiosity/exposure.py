@@ -34,6 +34,7 @@ import scipy.sparse as sp
 
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import cosine_directions, quadrature
+from .conserve import back_copies
 
 BURIED_RAYS = 8         # per quadrature point
 
@@ -51,6 +52,8 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
         return a
     patch_of = np.asarray(patch_of)
     _, patch_normal = scene.area_normal()
+    # a face with a back copy (two-sided: conserve.back_copies) met from behind is open
+    backed = back_copies(scene) >= 0
     eps = ray_offset(scale)
     on_points = np.zeros(L, bool) if near is None else near[leaves]
     for test in (np.flatnonzero(on_points), np.flatnonzero(~on_points)):
@@ -60,14 +63,15 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
             pts, w = quadrature(h.corners[leaves[test]], m)      # (t, m*m, 3), (t, m*m)
         else:                                                  # at its centre
             pts, w = h.centroid[leaves[test]][:, None], np.ones((len(test), 1))
-        buried = _buried(pts, h.normal[leaves[test]], occluder, patch_of, patch_normal, eps, rng)
+        buried = _buried(pts, h.normal[leaves[test]], occluder, patch_of, patch_normal, backed,
+                         eps, rng)
         a[test] = (w * ~buried).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
     return a
 
 
-def _buried(pts, n, occluder, patch_of, patch_normal, eps, rng):
+def _buried(pts, n, occluder, patch_of, patch_normal, backed, eps, rng):
     """(t, mm) bool: the points (t, mm, 3) on faces of normals n (t, 3) whose cosine rays all
-    meet backs of faces."""
+    meet backs of faces (not ``backed``: those of two-sided faces)."""
     mm, R = pts.shape[1], BURIED_RAYS
     buried = np.zeros(pts.shape[:2], bool)
     chunk = max(1, (1 << 20) // (mm * R))
@@ -79,8 +83,8 @@ def _buried(pts, n, occluder, patch_of, patch_normal, eps, rng):
         O = np.broadcast_to(pts[c0:c1, :, None] + eps * nn, D.shape)
         _, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
         hit = prim >= 0
-        back = hit & (np.einsum("ij,ij->i", patch_normal[patch_of[np.maximum(prim, 0)]],
-                                D.reshape(-1, 3)) > 0)
+        p = patch_of[np.maximum(prim, 0)]
+        back = hit & (np.einsum("ij,ij->i", patch_normal[p], D.reshape(-1, 3)) > 0) & ~backed[p]
         buried[c0:c1] = back.reshape(c1 - c0, mm, R).all(axis=2)
     return buried
 

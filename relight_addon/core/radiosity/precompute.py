@@ -22,11 +22,12 @@ from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
 from ..scene import SceneData, bilinear_point
 from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
-from .conserve import COVERAGE_RAYS, conserve_rows, hemisphere_coverage
+from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage
 from .contacts import contact_segments, split_at_contacts
 from .exposure import leaf_exposure
 from .source_split import split_sources
 from .hierarchy import Hierarchy
+from .memory import give_back_memory
 from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
                     visibility_types)
 from .presets import Quality, get_preset
@@ -209,6 +210,25 @@ class _LightEstimates:
         return self.mean[elements], self.spread[elements]
 
 
+# The oracle's thresholds are relative to the reflected radiosity that this fraction of the
+# surface area reaches or exceeds (the brightest leaves' level, but not a hot spot's): in
+# RenderPark's office the inside of a desk lamp's shade, 0.03 m^2 by a bulb of exitance
+# 89,500, reflects 39,000 where the room's brightest 0.1 % reflects 590, and thresholds
+# relative to it left every wall, the floor and the ceiling unrefined at draft (their radiosity
+# 40-145 % off Mitsuba's).  In the Cornell box and the family's rooms this level is 0.95-1.0 of
+# the brightest leaf's.
+BRIGHT_AREA = 0.001
+
+
+def _bright_level(values, area):
+    """The value (of ``values`` per leaf) reached or exceeded on BRIGHT_AREA of the total area."""
+    if len(values) == 0:
+        return 0.0
+    order = np.argsort(-values, kind="stable")
+    cum = np.cumsum(area[order])
+    return float(values[order][min(np.searchsorted(cum, BRIGHT_AREA * cum[-1]), len(cum) - 1)])
+
+
 def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_area):
     """Which links to refine, and on which side.
 
@@ -216,7 +236,7 @@ def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_a
     about B_s * spread(F over the receiver) on the receiver side and F_rs * var(B over the
     source) on the source side; the source polygon itself is integrated exactly.  A partially
     visible link is refined while B_s F_rs exceeds the (smaller) BFV threshold.  Thresholds are
-    relative to ``b_scale``, the brightest reflected radiosity (B - E), so that indirect light
+    relative to ``b_scale``, the brightest reflected radiosity (B - E: _bright_level), so that indirect light
     is refined as carefully as direct light however bright the lamps are.  With ``aggregate``
     the receiver side asks also that the sum of what the receiver gathers varies.
     """
@@ -410,8 +430,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         if lights is not None:          # a leaf's own light varies across it
             spread[system.leaves] = np.maximum(spread[system.leaves],
                                                rho_max[system.patch] * light_spread)
-        b_scale = float(reflected.max()) if len(reflected) and reflected.max() > 0 \
-            else float(e_max.max())
+        b_scale = _bright_level(reflected, system.leaf_area)
+        if b_scale <= 0:
+            b_scale = float(e_max.max())
         return b_elem, spread, max(b_scale, 1e-300)
 
     # Start from the patch-to-patch links and a first solution on them.
@@ -470,13 +491,16 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         F, V, vis, gather = final_form_factors(h, kept.receiver, kept.source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,
                                                timer=timer)
+        give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
+        give_back_memory()
     links = LinkSet(kept.receiver, kept.source, F, V, vis)
 
     with timer("lights"):
         system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
     with timer("conserve"):
         _conserve(h, system, gather, occluder, seed, scale, scene)
+        give_back_memory()
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
@@ -535,7 +559,10 @@ def _conserve(h, system, gather, occluder, seed, scale, scene):
     rng = np.random.default_rng([int(seed), 0xC0E5])      # its own stream: the rest is unchanged
     front, back = hemisphere_coverage(h, system.leaves, occluder, scene, COVERAGE_RAYS, rng,
                                       scale)
-    conserve_rows(system, gather, front, back, COVERAGE_RAYS, scene.occluder, h.patch)
+    counted = scene.occluder.copy()
+    backs = back_copies(scene)
+    counted[backs[backs >= 0]] = True
+    conserve_rows(system, gather, front, back, COVERAGE_RAYS, counted, h.patch)
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):

@@ -27,6 +27,7 @@ from ..geometry.formfactor import point_to_polygon
 from ..geometry.sampling import quadrature
 
 _CHUNK = 20_000          # entries whose children's form factors are computed at once
+_PICK_BLOCK = 1 << 20
 _THREADS = min(2, os.cpu_count() or 1)
 
 
@@ -42,8 +43,14 @@ def split_sources(h, gather, m: int, near: float, levels: int):
     for _ in range(levels):
         leaf, src = gather.leaf, gather.source
         child = h.first_child[src]
-        dist = np.linalg.norm(h.centroid[leaf] - h.centroid[src], axis=1)
-        pick = np.flatnonzero((child >= 0) & (gather.FV > 0) & (radius[src] > near * dist))
+        # in blocks: the distances' temporaries (~60 B an entry) peaked at GBs on RenderPark's
+        # office at medium
+        pick = np.concatenate([
+            a + np.flatnonzero((child[a:a + _PICK_BLOCK] >= 0) & (gather.FV[a:a + _PICK_BLOCK] > 0)
+                               & (radius[src[a:a + _PICK_BLOCK]] > near * np.linalg.norm(
+                                   h.centroid[leaf[a:a + _PICK_BLOCK]]
+                                   - h.centroid[src[a:a + _PICK_BLOCK]], axis=1)))
+            for a in range(0, len(leaf), _PICK_BLOCK)])
         if len(pick) == 0:
             break
         chunks = [pick[i:i + _CHUNK] for i in range(0, len(pick), _CHUNK)]

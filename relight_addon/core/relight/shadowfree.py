@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..radiosity.memory import give_back_memory
 from ..radiosity.precompute import Cancelled, regather, solve_basis, solve_radiosity
 from ..radiosity.presets import PROXY_FACTOR, get_preset
 from ..radiosity.proxy import build_proxy, texels_on
@@ -46,7 +47,7 @@ from .maps import (clipped_ratio, map_images, maps_from,
 from .reference import reference_correction
 from .refine import refine_by_texture
 from .texel import TexelLight
-from .texel_maps import give_back_memory, texel_maps
+from .texel_maps import texel_maps
 from .transport import Transport, as_given
 
 

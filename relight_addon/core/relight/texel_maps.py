@@ -13,13 +13,11 @@ are all known.
 """
 from __future__ import annotations
 
-import ctypes
-import sys
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
+from ..radiosity.memory import give_back_memory
 from .maps import DISPLAY_EPS, clipped_ratio, dilated, direct_fraction, texels_of
 from . import texel
 from .texel import leaf_indirect
@@ -86,26 +84,6 @@ def lamp_maps(light, sol, lamps, s, denominator, block=None):
         give_back_memory()
     out.finish(denominator)
     return out.maps, out.direct
-
-
-def give_back_memory():
-    """Return the C allocator's free pages to the system (glibc's malloc_trim; nothing
-    elsewhere).  A block's arrays of a few MB are freed into the heaps of the threads that made
-    them and would stay resident: on 16.5 M texels (bench_texel_scaling.py) 2.12 GB peak
-    without, 2.03 GB with (before float32 texel parameters)."""
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)
-
-
-@lru_cache(maxsize=1)
-def _malloc_trim():
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        return ctypes.CDLL("libc.so.6").malloc_trim
-    except (OSError, AttributeError):          # not glibc (musl)
-        return None
 
 
 def _blocks(T, block):
