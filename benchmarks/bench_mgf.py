@@ -1,0 +1,213 @@
+"""RenderPark's own example scene, side by side (issue 10 "Scale"): the office of rpkCpp's
+etc/office3/office.mgf (Radiance's office example converted to MGF: a desk, chairs, book
+cases, blinds, two fluorescent panels and a desk lamp; walls, floor and ceiling are thin slabs).
+
+The scene file is not shipped with the project (RenderPark's licence allows redistribution only
+with its authors' permission).  Fetch it from the public repository OscarChavarro/rpkCpp,
+commit 20874afedeea4e9a4e15119e911fd368203955c7, path etc/office3/office.mgf (51,972 bytes,
+sha256 fa299a7820ec7a0b7b954b0c192ba4640eb8ac4767aaf7469b35a3c5e6952e34), and pass its path.
+
+The file is read by benchmarks/mgf.py (curved surfaces cut as RenderPark does, 4 divisions per
+quarter circle: 12,463 faces, 12,629 patches, 3 lamps), its faces turned to the side their lamps
+light and given backs where both sides are lit (core/relight/orient.py: the slabs' faces point
+into the slabs, so read one-sided the room would see their backs), then solved by
+``solve_radiosity`` with one radiosity basis per lamp, as the precompute does.  Each preset runs
+in its own process, so that its peak RSS is its own.  The peer's figures are the issue's
+(rpkCpp, Galerkin hierarchical radiosity with clustering, one system for all lamps, one
+thread): 48 s and 0.9 GB for 13,780 faces.
+
+    python benchmarks/bench_mgf.py PATH/office.mgf [--presets draft,medium]
+
+Writes benchmarks/results/mgf.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+PEER = {"faces": 13_780, "seconds": 48.0, "peak_mb": 900.0}
+REFERENCE_PATCHES = 12
+REFERENCE_SPP = 1 << 20
+
+
+def child(path, preset):
+    import resource
+
+    import numpy as np
+    sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from mgf import parse_mgf
+    from relight_addon.core.radiosity.memory import estimate_precompute_memory
+    from relight_addon.core.radiosity.precompute import solve_radiosity
+    from relight_addon.core.relight.orient import orient
+    t0 = time.perf_counter()
+    model = parse_mgf(path)
+    scene = model.scene()
+    read_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    oriented = orient(scene, scene.make_occluder(), 0)
+    two = oriented.scene
+    orient_s = time.perf_counter() - t0
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    estimate = estimate_precompute_memory(two, preset, proxy=False) / 2**20
+    t0 = time.perf_counter()
+    sol = solve_radiosity(two, preset, seed=0)
+    B = sol.patch_radiosity()
+    solve_s = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    area = two.area_normal()[0]
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    emitted = float(area @ (two.emission @ lum))
+    reflected = float(area @ ((B - two.emission) @ lum))
+    rows = sol.system.gather(sol.system.exposure[:, None])[:, 0]     # 1 on exposed surfaces
+    probes = reference_patches(two)
+    print(json.dumps(dict(probes=probes.tolist(), probe_radiosity=(B[probes] @ lum).tolist(),
+        preset=preset, faces=model.faces, patches=scene.n_patches, patches_oriented=two.n_patches,
+        flipped=int(oriented.flipped.sum()), backs=int(len(oriented.back_of)),
+        lamps=len(scene.lamp_names), read_s=read_s, orient_s=orient_s, solve_s=solve_s,
+        rss_before_mb=rss_before, peak_mb=peak, estimate_mb=estimate,
+        elements=int(sol.hierarchy.n), leaves=int(len(sol.leaves)), links=int(sol.links.n),
+        iterations=int(sol.info.iterations), residual=float(sol.info.residual),
+        converged=bool(getattr(sol.info, "converged", True)),
+        reflected_over_emitted=reflected / max(emitted, 1e-300),
+        rows_max=float(rows.max()), finite=bool(np.isfinite(B).all()))))
+
+
+def oriented_scene(path):
+    sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from mgf import read_mgf
+    from relight_addon.core.relight.orient import orient
+    scene = read_mgf(path)
+    return orient(scene, scene.make_occluder(), 0)
+
+
+def reference_patches(scene, n=REFERENCE_PATCHES):
+    """The n largest patches that are not lamps: where Mitsuba's estimate is sharpest."""
+    import numpy as np
+    area = scene.area_normal()[0]
+    cand = np.flatnonzero(scene.lamp < 0)
+    return np.sort(cand[np.argsort(-area[cand], kind="stable")[:n]])
+
+
+def mitsuba_reference(path, probes, spp):
+    """Mitsuba 3's radiosity (luminance) of the ``probes`` patches of the oriented scene, with
+    their standard errors.  Mitsuba's surfaces are one-sided like ours; each back made for a
+    face lit on both sides is moved 0.1 mm behind its front, so that a ray meets the side it
+    comes from."""
+    import numpy as np
+    sys.path.insert(0, str(ROOT / "tests"))
+    from reference.mitsuba_ref import patch_radiosity
+    oriented = oriented_scene(path)
+    scene = oriented.scene
+    n = len(oriented.back_of)
+    if n:
+        corners = scene.corners.copy()
+        normal = scene.area_normal()[1]
+        corners[-n:] += 1e-4 * normal[-n:, None, :]
+        occluder = scene.occluder.copy()
+        occluder[-n:] = True         # its front blocks for it here; moved, it blocks itself
+        scene = replace(scene, corners=corners, occluder=occluder)
+    B, err = patch_radiosity(scene, probes, spp=spp, return_stderr=True)
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    return B @ lum, err @ lum
+
+
+def run(path, preset, timeout=3600):
+    cmd = [sys.executable, __file__, str(path), "--child", preset]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    lines = [x for x in out.stdout.splitlines() if x.startswith("{")]
+    if out.returncode or not lines:
+        raise RuntimeError(f"{preset}: {out.stderr[-2000:]}")
+    return json.loads(lines[-1])
+
+
+def report(rows, reference=None):
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    first = rows[0]
+    load = os.getloadavg()[0]
+    lines = [
+        "# RenderPark's office (MGF), side by side with rpkCpp", "",
+        "Generated by `benchmarks/bench_mgf.py` (see its docstring for the scene file, which is "
+        "not shipped).  " f"{first['faces']:,} faces read ({first['patches']:,} patches, "
+        f"{first['lamps']} lamps); turned to their lit side ({first['flipped']:,} flipped) with "
+        f"{first['backs']:,} backs where both sides are lit: {first['patches_oriented']:,} "
+        "patches solved, one basis per lamp.  Each preset in its own process; peak RSS "
+        "includes Python, numpy, scipy and Embree (the RSS before the solve is shown).  "
+        f"rpkCpp (the issue's measurement): {PEER['faces']:,} faces, {PEER['seconds']:.0f} s, "
+        f"{PEER['peak_mb']:.0f} MB.", "",
+        "| preset | elements | leaves | links | solve s | peak RSS MB | RSS before the solve MB "
+        "| estimate MB | peak / rpkCpp's | time / rpkCpp's | GMRES iterations | residual "
+        "| reflected / emitted | max row sum | vs Mitsuba mean % | max % |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(
+            f"| {r['preset']} | {r['elements']:,} | {r['leaves']:,} | {r['links']:,} | "
+            f"{r['solve_s']:.1f} | {r['peak_mb']:.0f} | {r['rss_before_mb']:.0f} | "
+            f"{r['estimate_mb']:.0f} | {r['peak_mb'] / PEER['peak_mb']:.2f} | "
+            f"{r['solve_s'] / PEER['seconds']:.2f} | {r['iterations']} | {r['residual']:.1e} | "
+            f"{r['reflected_over_emitted']:.3f} | {r['rows_max']:.4f} | "
+            + (f"{100 * r['ref_mean']:.2f} | {100 * r['ref_max']:.2f} |" if reference else "- | - |"))
+    lines += ["", "Reading the file took {:.1f} s and orienting the faces {:.1f} s (not in the "
+              "solve time).".format(first["read_s"], first["orient_s"]), "",
+              "\"reflected / emitted\": luminance power reflected by all patches over the power "
+              "the lamps emit (read one-sided, the slabs' backs facing the room, it was 0.0035 "
+              "of RenderPark's).", "",
+              f"Load average at the end: {load:.2f}; {os.cpu_count()} CPUs; Python "
+              f"{platform.python_version()}.  Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}."]
+    if reference:
+        lines[-3:-3] = [reference, ""]
+    (RESULTS / "mgf.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("path")
+    ap.add_argument("--presets", default="draft,medium")
+    ap.add_argument("--child")
+    ap.add_argument("--no-reference", action="store_true")
+    args = ap.parse_args()
+    if args.child:
+        child(args.path, args.child)
+        return
+    if not Path(args.path).is_file():
+        sys.exit(f"{args.path}: no such file (see this script's docstring for where to get it)")
+    rows = []
+    for preset in args.presets.split(","):
+        rows.append(run(args.path, preset))
+        print(preset, {k: v for k, v in rows[-1].items() if not k.startswith("probe")}, flush=True)
+    reference = None
+    if not args.no_reference:
+        import numpy as np
+        probes = rows[0]["probes"]
+        ref, err = mitsuba_reference(args.path, probes, REFERENCE_SPP)
+        lit = ref > 0             # a patch lying under another (a floor under its carpet) is dark
+        for r in rows:
+            ours = np.array(r["probe_radiosity"])
+            rel = np.abs(ours[lit] / ref[lit] - 1.0)
+            r["ref_mean"], r["ref_max"] = float(rel.mean()), float(rel.max())
+            r["dark_max"] = float(np.abs(ours[~lit]).max(initial=0.0))
+        reference = (f"Mitsuba 3 reference (tests/reference/mitsuba_ref.py, {REFERENCE_SPP:,} "
+                     f"samples per patch): luminance radiosity of the {len(probes)} largest "
+                     "patches that are not lamps (walls, floor, ceiling, desk tops), relative "
+                     f"standard error {100 * float(np.mean(err[lit] / ref[lit])):.2f} % on "
+                     f"average, {100 * float(np.max(err[lit] / ref[lit])):.2f} % at most.  "
+                     f"{int((~lit).sum())} of them lie under other faces and are dark in Mitsuba "
+                     "(ours at most " + ", ".join(f"{r['dark_max']:.3g}" for r in rows) +
+                     f" there, the lit ones at {float(np.median(ref[lit])):.0f} in the median): "
+                     "the error columns are over the others.")
+    report(rows, reference)
+
+
+if __name__ == "__main__":
+    main()
