@@ -11,6 +11,7 @@ photo's shadow edges.  Every estimate is a factor per lamp: photo units per scen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import nnls
@@ -314,8 +315,16 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     t, g = np.exp(full[:k]), float(np.exp(full[k]))
     sigma_vote = np.inf
     if indirect:          # the surfaces' vote at the current ratios (VOTE_*), not the pooled fit
-        g, sigma_vote = _vote_g(D.sum(axis=0), I.sum(axis=0), dlog_t, light.solution_texels,
-                                a, b, np.bincount(tm.patch), fallback=g)
+        D_sum, I_sum, stm = D.sum(axis=0), I.sum(axis=0), light.solution_texels
+        g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, stm, a, b, np.bincount(tm.patch),
+                                fallback=g)
+        if not np.isfinite(sigma_vote):
+            # pieces too small to vote (a scan's proxy triangles: family room 22's 20k-triangle
+            # scan held rho^ at 0.5, lamp off 0.85 -> 1.93): whole surfaces (groups) vote
+            group = np.asarray(sol.scene.group)
+            by_group = SimpleNamespace(patch=group[stm.patch], u=stm.u, v=stm.v)
+            g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, by_group, a, b,
+                                    np.ones(int(group.max(initial=0)) + 1), fallback=g)
     if folds <= 1:
         return EdgeFit(t, g, np.zeros(k), 0.0, share, sigma_vote)
     # Jackknife over groups of surfaces (patch groups, dealt into folds by texel count): a
