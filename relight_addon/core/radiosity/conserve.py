@@ -66,12 +66,12 @@ def back_copies(scene):
     return out
 
 
-def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale):
+def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs):
     """Per leaf (L,): the fractions of cosine-weighted rays from random points of the leaf that
     first meet the front of a source of ``scene`` (a patch that reflects or emits, or the back
-    copy of a two-sided face met from behind), and that meet anything else (a back, a black
-    surface, a surface touching the leaf).  ``occluder`` knows the patch of each triangle
-    (``patch_of_triangle``)."""
+    copy of a two-sided face met from behind: ``backs``, from ``back_copies``), and that meet
+    anything else (a back, a black surface, a surface touching the leaf).  ``occluder`` knows
+    the patch of each triangle (``patch_of_triangle``)."""
     L = len(leaves)
     front = np.zeros(L)
     other = np.zeros(L)
@@ -80,7 +80,7 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale):
     patch_of = np.asarray(occluder.patch_of_triangle)
     _, normal = scene.area_normal()                  # the scene's own sides (after orienting)
     source = (scene.rho.max(axis=1) > 0) | (scene.emission.max(axis=1) > 0)
-    backed = back_copies(scene) >= 0          # met from behind, their back copy is the source
+    backed = backs >= 0                       # met from behind, their back copy is the source
     c = h.corners[leaves]
     n = h.normal[leaves]
     eps = ray_offset(scale)
@@ -110,8 +110,9 @@ def conserve_rows(system, gather, front, other, rays, occluder_patch, element_pa
     ``front`` (see the module's docstring); returns the per-leaf factor on the estimated
     entries.  ``occluder_patch`` (per patch): whether its entries are counted (it blocks rays,
     or it is the back copy of a face that does: ``back_copies``); others (an area light's
-    patch) are seen through the surfaces the coverage counts: neither counted nor changed.  Cluster links
-    (far, approximate) are counted and kept.  ``element_patch``: the patch of each element."""
+    patch) are seen through the surfaces the coverage counts: neither counted nor changed.
+    Cluster links (far, approximate) are counted and kept.  ``element_patch``: the patch of
+    each element."""
     L = system.n_leaves
     occluder_patch = np.asarray(occluder_patch, bool)
 
@@ -134,7 +135,7 @@ def conserve_rows(system, gather, front, other, rays, occluder_patch, element_pa
         estim += np.bincount(slot, np.where(estimated, FV, 0.0), L)
     clusters = np.zeros(L)
     if system.U is not None:
-        blocking = np.asarray(occluder_patch, bool)[system.patch].astype(float)
+        blocking = occluder_patch[system.patch].astype(float)
         clusters = system.U @ (system.W @ blocking)
     rows = fixed + estim + clusters
     # Every ray met a source's front: the target is exact (a closed view), the row must be 1.

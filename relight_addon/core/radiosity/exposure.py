@@ -43,8 +43,7 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     """Exposure (L,) in [0, 1] of each leaf (see the module docstring).  ``near`` (h.n,) bool:
     the leaves that gather on their m x m quadrature points (links.final_form_factors), the
     others gather at their centre, which decides for them (0 or 1; every leaf at draft, m = 1).
-    ``occluder`` knows the patch of each of its
-    triangles (``patch_of_triangle``)."""
+    ``occluder`` knows the patch of each of its triangles (``patch_of_triangle``)."""
     L = len(leaves)
     a = np.ones(L)
     patch_of = getattr(occluder, "patch_of_triangle", None) if occluder is not None else None

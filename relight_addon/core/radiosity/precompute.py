@@ -236,8 +236,9 @@ def _oracle(h, links: LinkSet, b_est, b_var, b_scale, rho_max, q: Quality, min_a
     about B_s * spread(F over the receiver) on the receiver side and F_rs * var(B over the
     source) on the source side; the source polygon itself is integrated exactly.  A partially
     visible link is refined while B_s F_rs exceeds the (smaller) BFV threshold.  Thresholds are
-    relative to ``b_scale``, the brightest reflected radiosity (B - E: _bright_level), so that indirect light
-    is refined as carefully as direct light however bright the lamps are.  With ``aggregate``
+    relative to ``b_scale``, the reflected radiosity (B - E) of the brightest leaves
+    (_bright_level), so that indirect light is refined as carefully as direct light however
+    bright the lamps are.  With ``aggregate``
     the receiver side asks also that the sum of what the receiver gathers varies.
     """
     r, s = links.receiver, links.source
@@ -557,10 +558,10 @@ def _conserve(h, system, gather, occluder, seed, scale, scene):
     if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
         return
     rng = np.random.default_rng([int(seed), 0xC0E5])      # its own stream: the rest is unchanged
-    front, back = hemisphere_coverage(h, system.leaves, occluder, scene, COVERAGE_RAYS, rng,
-                                      scale)
-    counted = scene.occluder.copy()
     backs = back_copies(scene)
+    front, back = hemisphere_coverage(h, system.leaves, occluder, scene, COVERAGE_RAYS, rng,
+                                      scale, backs)
+    counted = scene.occluder.copy()
     counted[backs[backs >= 0]] = True
     conserve_rows(system, gather, front, back, COVERAGE_RAYS, counted, h.patch)
 
