@@ -27,7 +27,6 @@ to 1e-14 at draft and medium (was up to 3.5x the exact value); the Cornell box i
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import cosine_directions
@@ -105,15 +104,16 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs):
     return front, other
 
 
-def conserve_rows(system, gather, front, other, rays, occluder_patch, element_patch):
-    """Scale ``gather.FV`` (in place) so that every leaf's row meets its hemisphere coverage
-    ``front`` (see the module's docstring); returns the per-leaf factor on the estimated
-    entries.  ``occluder_patch`` (per patch): whether its entries are counted (it blocks rays,
-    or it is the back copy of a face that does: ``back_copies``); others (an area light's
-    patch) are seen through the surfaces the coverage counts: neither counted nor changed.
-    Cluster links (far, approximate) are counted and kept.  ``element_patch``: the patch of
-    each element."""
-    L = system.n_leaves
+def conserve_rows(leaves, clusters, gather, front, other, rays, occluder_patch, element_patch):
+    """Scale ``gather.FV`` (a LeafGather; in place) so that every leaf's row meets its hemisphere
+    coverage ``front`` (see the module's docstring); returns the per-leaf factor on the
+    estimated entries.  ``leaves``: the leaf ids, the rows' order; ``clusters``: the (U, W) of
+    cluster links (clusters.cluster_operator) or None.  ``occluder_patch`` (per patch): whether
+    its entries are counted (it blocks rays, or it is the back copy of a face that does:
+    ``back_copies``); others (an area light's patch) are seen through the surfaces the
+    coverage counts: neither counted nor changed.  Cluster links (far, approximate) are counted
+    and kept.  ``element_patch``: the patch of each element."""
+    L = len(leaves)
     occluder_patch = np.asarray(occluder_patch, bool)
 
     def entries(a):
@@ -123,8 +123,7 @@ def conserve_rows(system, gather, front, other, rays, occluder_patch, element_pa
         FV, F = gather.FV[a:a + CONSERVE_BLOCK], gather.F[a:a + CONSERVE_BLOCK]
         counted = occluder_patch[element_patch[gather.source[a:a + CONSERVE_BLOCK]]]
         estimated = counted & (FV > 0) & ((F == 0) | (FV < F * (1.0 - 1e-9)))
-        return np.searchsorted(system.leaves, gather.leaf[a:a + CONSERVE_BLOCK]), counted, \
-            estimated
+        return np.searchsorted(leaves, gather.leaf[a:a + CONSERVE_BLOCK]), counted, estimated
 
     blocks = range(0, len(gather.leaf), CONSERVE_BLOCK)
     fixed, estim = np.zeros(L), np.zeros(L)
@@ -133,16 +132,16 @@ def conserve_rows(system, gather, front, other, rays, occluder_patch, element_pa
         FV = gather.FV[a:a + CONSERVE_BLOCK]
         fixed += np.bincount(slot, np.where(counted & ~estimated, FV, 0.0), L)
         estim += np.bincount(slot, np.where(estimated, FV, 0.0), L)
-    clusters = np.zeros(L)
-    if system.U is not None:
-        blocking = occluder_patch[system.patch].astype(float)
-        clusters = system.U @ (system.W @ blocking)
-    rows = fixed + estim + clusters
+    from_clusters = np.zeros(L)
+    if clusters is not None:
+        U, W = clusters
+        from_clusters = U @ (W @ occluder_patch[element_patch[leaves]].astype(float))
+    rows = fixed + estim + from_clusters
     # Every ray met a source's front: the target is exact (a closed view), the row must be 1.
     # Elsewhere the coverage is only a binomial estimate, worse than the row's own form factors
     # (moving rows that are off it one way only biased an open scene by 6 %): only the bound.
     closed = (front == 1.0) & (other == 0.0)
-    want = np.where(closed, 1.0, np.minimum(rows, 1.0)) - clusters
+    want = np.where(closed, 1.0, np.minimum(rows, 1.0)) - from_clusters
     alpha = np.where(estim > 0, np.clip((want - fixed) / np.where(estim > 0, estim, 1.0),
                                         0.0, MAX_GAIN), 1.0)
     rest = want - fixed - alpha * estim
@@ -153,6 +152,4 @@ def conserve_rows(system, gather, front, other, rays, occluder_patch, element_pa
         slot, counted, estimated = entries(a)
         gather.FV[a:a + CONSERVE_BLOCK] *= np.where(estimated, alpha[slot],
                                                     np.where(counted, beta[slot], 1.0))
-    system.M = sp.csr_matrix((gather.FV, (np.searchsorted(system.leaves, gather.leaf),
-                                          gather.source)), shape=system.M.shape)
     return alpha

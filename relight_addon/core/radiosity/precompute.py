@@ -25,6 +25,7 @@ from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, 
 from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage
 from .contacts import contact_segments, split_at_contacts
 from .exposure import leaf_exposure
+from .gather_rows import GatherRows
 from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .memory import give_back_memory
@@ -54,7 +55,7 @@ class RadiositySolution:
     hierarchy: Hierarchy
     links: LinkSet
     system: LeafSystem
-    gather: object                    # LeafGather: per-leaf F and F*V of every link
+    gather: object                    # GatherRows: per-leaf F and F*V of every link, by rows
     basis: np.ndarray                 # (k, L, 3) per-lamp leaf radiosity
     info: SolveInfo
     # Direct irradiance from scene.lights per lamp (k, L, 3) on the leaves, at unit exitance
@@ -404,9 +405,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     lights = _LightEstimates(scene, h, occluder, q.oracle_rays, rng, scale) \
         if len(scene.lights) else None
 
-    def leaf_system(receiver, source, transport, links_are_leaf_entries=False):
-        cls = LeafSystem if links_are_leaf_entries else LeafSystem.from_links
-        system = cls(h, receiver, source, transport, scene.rho)
+    def leaf_system(receiver, source, transport):
+        system = LeafSystem.from_links(h, receiver, source, transport, scene.rho)
         if len(cX):
             system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
         return system
@@ -497,11 +497,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         give_back_memory()
     links = LinkSet(kept.receiver, kept.source, F, V, vis)
 
-    with timer("lights"):
-        system = leaf_system(gather.leaf, gather.source, gather.FV, links_are_leaf_entries=True)
     with timer("conserve"):
-        _conserve(h, system, gather, occluder, seed, scale, scene)
-        give_back_memory()
+        system, gather = _final_system(h, gather, (tree, cX, cY, cV), occluder, seed, scale,
+                                       scene)
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
@@ -535,13 +533,10 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
                                            with_leaves=True)
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
+    system, gather = _final_system(h, gather, ctx.get("clusters", (None, (), (), ())),
+                                   ctx.get("occluder"), seed, ctx.get("scale", 1.0),
+                                   solution.scene)
     solution.gather = gather
-    system = LeafSystem(h, gather.leaf, gather.source, gather.FV, solution.scene.rho)
-    tree, cX, cY, cV = ctx.get("clusters", (None, (), (), ()))
-    if len(cX):
-        system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
-    _conserve(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
-              solution.scene)
     _expose(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
             solution.scene, q)
     solution.system = system
@@ -552,18 +547,33 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     return solution
 
 
-def _conserve(h, system, gather, occluder, seed, scale, scene):
+def _final_system(h, gather, clusters, occluder, seed, scale, scene):
+    """The leaf system of the final form factors: rows conserved, then stored once (gather_rows:
+    the solver's matrix shares their arrays).  Returns (system, GatherRows); empties ``gather``."""
+    leaves = h.leaves()
+    tree, cX, cY, cV = clusters
+    low_rank = cluster_operator(tree, h, leaves, cX, cY, cV) if len(cX) else None
+    _conserve(h, leaves, low_rank, gather, occluder, seed, scale, scene)
+    rows = GatherRows.from_entries(leaves, gather, h.n)
+    give_back_memory()
+    system = LeafSystem.from_rows(h, rows, scene.rho)
+    if low_rank is not None:
+        system.add_clusters(*low_rank)
+    return system, rows
+
+
+def _conserve(h, leaves, clusters, gather, occluder, seed, scale, scene):
     """No leaf gathers more than the part of its hemisphere that sees sources (conserve.py).
     Needs a ray caster that knows its triangles' patches (``SceneData.make_occluder``)."""
     if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
         return
     rng = np.random.default_rng([int(seed), 0xC0E5])      # its own stream: the rest is unchanged
     backs = back_copies(scene)
-    front, back = hemisphere_coverage(h, system.leaves, occluder, scene, COVERAGE_RAYS, rng,
-                                      scale, backs)
+    front, back = hemisphere_coverage(h, leaves, occluder, scene, COVERAGE_RAYS, rng, scale,
+                                      backs)
     counted = scene.occluder.copy()
     counted[backs[backs >= 0]] = True
-    conserve_rows(system, gather, front, back, COVERAGE_RAYS, counted, h.patch)
+    conserve_rows(leaves, clusters, gather, front, back, COVERAGE_RAYS, counted, h.patch)
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):

@@ -61,6 +61,14 @@ class LeafSystem:
         self.exposure = np.ones(L)                          # see set_exposure
 
     @classmethod
+    def from_rows(cls, h: Hierarchy, rows, rho_patch, values=None):
+        """On a gather stored by rows (gather_rows.GatherRows), its F V by default: the matrix
+        holds the rows' own array (no copy), so scaling it in place scales the operator."""
+        system = cls(h, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), rho_patch)
+        system.M = rows.matrix(rows.FV if values is None else values, h.n)
+        return system
+
+    @classmethod
     def from_links(cls, h: Hierarchy, receiver, source, transport, rho_patch):
         leaves = h.leaves()
         pos, anc = h.ancestor_pairs(leaves)

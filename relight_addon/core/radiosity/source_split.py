@@ -41,19 +41,14 @@ def split_sources(h, gather, m: int, near: float, levels: int):
     on_points = gather.near if gather.near is not None else np.zeros(h.n, bool)
     total = 0
     for _ in range(levels):
-        leaf, src = gather.leaf, gather.source
-        child = h.first_child[src]
         # in blocks: the distances' temporaries (~60 B an entry) peaked at GBs on RenderPark's
         # office at medium
-        pick = np.concatenate([
-            a + np.flatnonzero((child[a:a + _PICK_BLOCK] >= 0) & (gather.FV[a:a + _PICK_BLOCK] > 0)
-                               & (radius[src[a:a + _PICK_BLOCK]] > near * np.linalg.norm(
-                                   h.centroid[leaf[a:a + _PICK_BLOCK]]
-                                   - h.centroid[src[a:a + _PICK_BLOCK]], axis=1)))
-            for a in range(0, len(leaf), _PICK_BLOCK)])
+        pick = np.concatenate([a + _to_split(h, gather, a, a + _PICK_BLOCK, radius, near)
+                               for a in range(0, len(gather.leaf), _PICK_BLOCK)])
         if len(pick) == 0:
             break
-        chunks = [pick[i:i + _CHUNK] for i in range(0, len(pick), _CHUNK)]
+        leaf, child = gather.leaf[pick], h.first_child[gather.source[pick]]
+        chunks = [slice(i, i + _CHUNK) for i in range(0, len(pick), _CHUNK)]
         if len(chunks) > 1 and _THREADS > 1:
             with ThreadPoolExecutor(_THREADS) as pool:
                 shares = list(pool.map(lambda c: _child_shares(h, leaf[c], child[c], on_points, m),
@@ -61,14 +56,24 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         else:
             shares = [_child_shares(h, leaf[c], child[c], on_points, m) for c in chunks]
         share = np.concatenate(shares)                              # (n, 4)
-        keep = np.ones(len(leaf), bool)
+        keep = np.ones(len(gather.leaf), bool)
         keep[pick] = False
-        gather.leaf = np.concatenate([leaf[keep], np.repeat(leaf[pick], 4)])
-        gather.source = np.concatenate([src[keep], (child[pick][:, None] + np.arange(4)).ravel()])
+        # one field at a time, the old array released as its successor is made
+        gather.leaf = np.concatenate([gather.leaf[keep], np.repeat(leaf, 4)])
+        gather.source = np.concatenate([gather.source[keep], (child[:, None] + np.arange(4))
+                                        .ravel().astype(gather.source.dtype)])
         gather.F = np.concatenate([gather.F[keep], (gather.F[pick][:, None] * share).ravel()])
         gather.FV = np.concatenate([gather.FV[keep], (gather.FV[pick][:, None] * share).ravel()])
         total += len(pick)
     return total
+
+
+def _to_split(h, gather, a, b, radius, near):
+    """Offsets (from ``a``) of the entries a:b to split: a source with children, seen, near."""
+    src, leaf = gather.source[a:b], gather.leaf[a:b]
+    return np.flatnonzero((h.first_child[src] >= 0) & (gather.FV[a:b] > 0)
+                          & (radius[src] > near * np.linalg.norm(h.centroid[leaf]
+                                                                 - h.centroid[src], axis=1)))
 
 
 def _child_shares(h, leaf, first_child, on_points, m):

@@ -22,11 +22,11 @@ class Transport:
         h, g = sol.hierarchy, sol.gather
         rho = sol.scene.rho
         self.occ = sol.system
-        self.unocc = LeafSystem(h, g.leaf, g.source, g.F, rho)
+        self.unocc = LeafSystem.from_rows(h, g, rho, g.F)
         self.unocc.U, self.unocc.W = sol.system.U, sol.system.W
-        lamp_src = sol.scene.lamp[h.patch[g.source]] >= 0
-        self.dir_occ = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.FV[lamp_src], rho)
-        self.dir_unocc = LeafSystem(h, g.leaf[lamp_src], g.source[lamp_src], g.F[lamp_src], rho)
+        lamps = g.restrict(sol.scene.lamp[h.patch[g.source]] >= 0)
+        self.dir_occ = LeafSystem.from_rows(h, lamps, rho)
+        self.dir_unocc = LeafSystem.from_rows(h, lamps, rho, lamps.F)
         # every system reads its sources as the solution's does (exposed parts: exposure.py)
         for system in (self.unocc, self.dir_occ, self.dir_unocc):
             system.P_up, system.exposure = sol.system.P_up, sol.system.exposure
