@@ -39,15 +39,14 @@ class GatherRows:
         gather.leaf = None
         shape = (len(leaves), n_elements)
         source = gather.source.astype(INDEX, copy=False)
-        gather.source = None
+        F = gather.F.astype(np.float32)
+        gather.source = gather.F = None
         # scipy sorts into rows by counting (no argsort) and sums duplicates in place; the same
         # pattern sorts the same way for any data, so F's rows line up with F V's
         fv = sp.coo_matrix((gather.FV, (slot, source)), shape=shape).tocsr()
         gather.FV = None
-        f = sp.coo_matrix((gather.F.astype(np.float32, copy=False), (slot, source)),
-                          shape=shape).tocsr()
-        gather.F = None
-        del slot, source
+        f = sp.coo_matrix((F, (slot, source)), shape=shape).tocsr()
+        del slot, source, F
         if not (np.array_equal(f.indptr, fv.indptr) and np.array_equal(f.indices, fv.indices)):
             raise AssertionError("the unoccluded rows did not sort like the occluded ones")
         return cls(np.asarray(leaves), fv.indptr, fv.indices.astype(INDEX, copy=False),

@@ -282,9 +282,20 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         pair_src = np.repeat(ls, count[lr])
         gap = np.linalg.norm(h.centroid[leaf_ids] - h.centroid[pair_src], axis=1) - radius[pair_src]
         leaf_near[leaf_ids[radius[leaf_ids] > _FAR_RATIO * gap]] = True
+
+    # The (link, leaf) pairs' entries are written in place, chunk by chunk (each chunk's are a
+    # known range): kept as chunks' arrays and joined they doubled the office's peak.  The rays'
+    # entries of partly visible links (their count unknown ahead) are appended after them.
+    pair_start = np.concatenate([[0], np.cumsum(count[r])])
+    n_pair_entries = int(pair_start[-1]) if with_leaves else 0
+    gather = LeafGather(np.empty(n_pair_entries, np.int32), np.empty(n_pair_entries, np.int32),
+                        np.empty(n_pair_entries), np.empty(n_pair_entries), leaf_near)
+
     def process(links, chunk_rng):
-        """One chunk of links; writes its rows of F, Fv, seen_* and returns its gather parts."""
+        """One chunk of links; writes its rows of F, Fv, seen_* and its pairs' gather entries,
+        returns its rays' gather entries."""
         chunk_parts = []
+        at = slice(pair_start[links[0]], pair_start[links[-1] + 1])
         lr, ls = r[links], s[links]
         nleaf = count[lr]
         leaf_ids = leaf_of[_segment_ranges(first[lr], nleaf)]           # per (link, leaf) pair
@@ -344,7 +355,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         pw = np.maximum(np.bincount(pair_pt, W, n_pairs), 1e-300)
         pair_F = np.bincount(pair_pt, W * f, n_pairs) / pw
         if occluder is None or rays <= 0:
-            chunk_parts.append(LeafGather.of(leaf_ids, ls[link_of], pair_F, pair_F.copy()))
+            gather.leaf[at], gather.source[at] = leaf_ids, ls[link_of]
+            gather.F[at] = gather.FV[at] = pair_F
             return chunk_parts
         # Partially visible links gather from the source leaf each free ray lands in, rather
         # than from the source's mean radiosity: a hidden part of a source is often dark too
@@ -353,7 +365,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             np.bincount(link_ray, free, len(links)) > 0)
         by_ray = partial_link[link_pt] & (tried > 0)
         pair_FV = np.bincount(pair_pt, np.where(by_ray, 0.0, W * f * free_frac), n_pairs) / pw
-        chunk_parts.append(LeafGather.of(leaf_ids, ls[link_of], pair_F, pair_FV))
+        gather.leaf[at], gather.source[at] = leaf_ids, ls[link_of]
+        gather.F[at], gather.FV[at] = pair_F, pair_FV
         use = free & by_ray[ray_pt]
         if use.any():
             rp = ray_pt[use]
@@ -382,9 +395,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     vis = np.where(seen_blocked, np.where(seen_free, PARTIAL, INVISIBLE), VISIBLE).astype(np.int8)
     if not with_leaves:
         return F, V, vis
-    gather = LeafGather(*(None,) * 4, near=leaf_near)
-    for key in ("leaf", "source", "F", "FV"):          # one field at a time: half the peak
-        setattr(gather, key, np.concatenate([getattr(p, key) for p in parts]))
+    for key in ("leaf", "source", "F", "FV"):          # one field at a time
+        setattr(gather, key, np.concatenate([getattr(gather, key)]
+                                            + [getattr(p, key) for p in parts]))
         for p in parts:
             setattr(p, key, None)
     return F, V, vis, gather

@@ -441,13 +441,14 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         F, spread, free, partial, Fp = oracle_estimates(h, r0, s0, occluder, q.oracle_rays, rng,
                                                         scale, timer)
     kept = LinkSet(r0, s0, F, free, visibility_types(free, partial), spread, Fp)
+    del r0, s0, F, spread, free, partial, Fp       # (kept holds them: freed with it)
     with timer("solve"):
         b_est, b_var, b_scale = estimate_radiosity(kept)
     fresh_r = fresh_s = np.zeros(0, np.int64)
     for pass_no in range(q.passes):
         report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
         changed = False
-        pending = kept
+        pending, kept = kept, None         # one copy of the links at a time (GBs on the office)
         kept_parts = []
         for _ in range(MAX_REFINE_ROUNDS):
             if len(fresh_r):
@@ -482,20 +483,23 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                 fresh_r, fresh_s = nr[ok], ns[ok]
                 pending = LinkSet.empty()
         kept = LinkSet.concat(kept_parts)
+        kept_parts = pending = None
         if pass_no + 1 == q.passes or not changed:
             break
         with timer("solve"):
             b_est, b_var, b_scale = estimate_radiosity(kept)
 
     report(0.7, f"Form factors and visibility for {kept.n} links")
+    receiver, source = kept.receiver, kept.source
+    del kept                            # the oracle's estimates: 77 B a link
     with timer("final_links"):
-        F, V, vis, gather = final_form_factors(h, kept.receiver, kept.source, occluder,
+        F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,
                                                timer=timer)
         give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
         give_back_memory()
-    links = LinkSet(kept.receiver, kept.source, F, V, vis)
+    links = LinkSet(receiver, source, F, V, vis)
 
     with timer("conserve"):
         system, gather = _final_system(h, gather, (tree, cX, cY, cV), occluder, seed, scale,

@@ -58,12 +58,22 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         share = np.concatenate(shares)                              # (n, 4)
         keep = np.ones(len(gather.leaf), bool)
         keep[pick] = False
-        # one field at a time, the old array released as its successor is made
-        gather.leaf = np.concatenate([gather.leaf[keep], np.repeat(leaf, 4)])
-        gather.source = np.concatenate([gather.source[keep], (child[:, None] + np.arange(4))
-                                        .ravel().astype(gather.source.dtype)])
-        gather.F = np.concatenate([gather.F[keep], (gather.F[pick][:, None] * share).ravel()])
-        gather.FV = np.concatenate([gather.FV[keep], (gather.FV[pick][:, None] * share).ravel()])
+
+        def grown(old, children):
+            """The kept entries of ``old`` then ``children``, with no copy of the kept part
+            on the way (the old array is released as its successor is made)."""
+            out = np.empty(len(old) - len(pick) + len(children), old.dtype)
+            at = 0
+            for a in range(0, len(old), _PICK_BLOCK):      # (np.compress makes an index array)
+                kept = old[a:a + _PICK_BLOCK][keep[a:a + _PICK_BLOCK]]
+                out[at:at + len(kept)] = kept
+                at += len(kept)
+            out[at:] = children
+            return out
+        gather.leaf = grown(gather.leaf, np.repeat(leaf, 4))
+        gather.source = grown(gather.source, (child[:, None] + np.arange(4)).ravel())
+        gather.F = grown(gather.F, (gather.F[pick][:, None] * share).ravel())
+        gather.FV = grown(gather.FV, (gather.FV[pick][:, None] * share).ravel())
         total += len(pick)
     return total
 
