@@ -48,32 +48,43 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         if len(pick) == 0:
             break
         leaf, child = gather.leaf[pick], h.first_child[gather.source[pick]]
-        chunks = [slice(i, i + _CHUNK) for i in range(0, len(pick), _CHUNK)]
-        if len(chunks) > 1 and _THREADS > 1:
-            with ThreadPoolExecutor(_THREADS) as pool:
-                shares = list(pool.map(lambda c: _child_shares(h, leaf[c], child[c], on_points, m),
-                                       chunks))
-        else:
-            shares = [_child_shares(h, leaf[c], child[c], on_points, m) for c in chunks]
-        share = np.concatenate(shares)                              # (n, 4)
+        F_pick, FV_pick = gather.F[pick], gather.FV[pick]
         keep = np.ones(len(gather.leaf), bool)
         keep[pick] = False
+        n_keep = len(keep) - len(pick)
 
-        def grown(old, children):
-            """The kept entries of ``old`` then ``children``, with no copy of the kept part
-            on the way (the old array is released as its successor is made)."""
-            out = np.empty(len(old) - len(pick) + len(children), old.dtype)
+        def grown(old, children=None):
+            """The kept entries of ``old`` then room for 4 children a pick (``children`` or
+            filled below), the kept part copied in blocks (np.compress makes an index array);
+            the old array is released as its successor is made."""
+            out = np.empty(n_keep + 4 * len(pick), old.dtype)
             at = 0
-            for a in range(0, len(old), _PICK_BLOCK):      # (np.compress makes an index array)
+            for a in range(0, len(old), _PICK_BLOCK):
                 kept = old[a:a + _PICK_BLOCK][keep[a:a + _PICK_BLOCK]]
                 out[at:at + len(kept)] = kept
                 at += len(kept)
-            out[at:] = children
+            if children is not None:
+                out[n_keep:] = children
             return out
         gather.leaf = grown(gather.leaf, np.repeat(leaf, 4))
         gather.source = grown(gather.source, (child[:, None] + np.arange(4)).ravel())
-        gather.F = grown(gather.F, (gather.F[pick][:, None] * share).ravel())
-        gather.FV = grown(gather.FV, (gather.FV[pick][:, None] * share).ravel())
+        gather.F = grown(gather.F)
+        gather.FV = grown(gather.FV)
+
+        def fill(c):
+            """The children's entries of the picks ``c`` (a slice), written in place: the
+            shares (32 B a pick) are never all held at once."""
+            share = _child_shares(h, leaf[c], child[c], on_points, m)           # (n, 4)
+            at = slice(n_keep + 4 * c.start, n_keep + 4 * (c.start + len(share)))
+            gather.F[at] = (F_pick[c][:, None] * share).ravel()
+            gather.FV[at] = (FV_pick[c][:, None] * share).ravel()
+        chunks = [slice(i, i + _CHUNK) for i in range(0, len(pick), _CHUNK)]
+        if len(chunks) > 1 and _THREADS > 1:
+            with ThreadPoolExecutor(_THREADS) as pool:
+                list(pool.map(fill, chunks))
+        else:
+            for c in chunks:
+                fill(c)
         total += len(pick)
     return total
 
