@@ -21,6 +21,7 @@ from .links import _segment_ranges
 
 _PLANE_TOL = 1e-4       # x scene size: an edge this close to a plane lies in it
 _INSIDE_TOL = 1e-3      # x the element's diameter: a line along its border does not cross it
+_EDGE_BLOCK = 2048
 
 
 def contact_segments(scene, scale):
@@ -50,17 +51,27 @@ def contact_segments(scene, scale):
     ei_parts, fj_parts = [], []
     for c in np.unique(size_class):
         members = np.flatnonzero(size_class == c)
-        near = cKDTree(centre[members]).query_ball_point(mid, half + radius[members].max() + tol)
-        ei_parts.append(np.repeat(np.arange(len(seg)), [len(x) for x in near]))
-        fj_parts.append(members[np.concatenate([np.asarray(x, np.int64) for x in near])]
-                        if len(ei_parts[-1]) else np.zeros(0, np.int64))
+        tree = cKDTree(centre[members])
+        reach = half + radius[members].max() + tol
+        # edges in blocks, each block's pairs cut to those in a face's plane at once: on
+        # RenderPark's office (50k edges) all the candidates together peaked at 2.2 GB
+        for e0 in range(0, len(seg), _EDGE_BLOCK):
+            near = tree.query_ball_point(mid[e0:e0 + _EDGE_BLOCK], reach[e0:e0 + _EDGE_BLOCK])
+            counts = [len(x) for x in near]
+            if not sum(counts):
+                continue
+            ei = e0 + np.repeat(np.arange(len(near)), counts)
+            fj = members[np.concatenate([np.asarray(x, np.int64) for x in near])]
+            keep = fj != src[ei]
+            ei, fj = ei[keep], fj[keep]
+            # both ends in the face's plane
+            d = np.einsum("eij,ej->ei", seg[ei] - corners[fj][:, None, 0], normal[fj])
+            keep = np.all(np.abs(d) <= tol, axis=1)
+            ei_parts.append(ei[keep])
+            fj_parts.append(fj[keep])
+    if not ei_parts:
+        return np.zeros((0, 2, 3)), np.zeros(0, np.int64)
     ei, fj = np.concatenate(ei_parts), np.concatenate(fj_parts)
-    keep = fj != src[ei]
-    ei, fj = ei[keep], fj[keep]
-    # both ends in the face's plane
-    d = np.einsum("eij,ej->ei", seg[ei] - corners[fj][:, None, 0], normal[fj])
-    keep = np.all(np.abs(d) <= tol, axis=1)
-    ei, fj = ei[keep], fj[keep]
     inside, a, b = _crossing(seg[ei, 0], seg[ei, 1], corners[fj], normal[fj],
                              _INSIDE_TOL * 2 * radius[fj])
     return np.stack([a[inside], b[inside]], axis=1), fj[inside]
