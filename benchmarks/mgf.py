@@ -621,19 +621,18 @@ class _Reader:
         self._surface(cone_polygons(self._vertex(w[1]).p, self._radius(w[2]),
                                     self._vertex(w[3]).p, self._radius(w[4]), self.nqcdivs))
 
-    def e_ring(self, w, path):
+    def _about_axis(self, w, polygons):
+        """ring and torus: a centre vertex (its normal the axis) and two radii."""
         if len(w) != 4:
-            raise MgfError("ring takes: centre minradius maxradius")
+            raise MgfError(f"{w[0]} takes: centre minradius maxradius")
         v = self._vertex(w[1])
-        self._surface(ring_polygons(v.p, v.n, self._radius(w[2]), self._radius(w[3]),
-                                    self.nqcdivs))
+        self._surface(polygons(v.p, v.n, self._radius(w[2]), self._radius(w[3]), self.nqcdivs))
+
+    def e_ring(self, w, path):
+        self._about_axis(w, ring_polygons)
 
     def e_torus(self, w, path):
-        if len(w) != 4:
-            raise MgfError("torus takes: centre minradius maxradius")
-        v = self._vertex(w[1])
-        self._surface(torus_polygons(v.p, v.n, self._radius(w[2]), self._radius(w[3]),
-                                     self.nqcdivs))
+        self._about_axis(w, torus_polygons)
 
     def e_prism(self, w, path):
         if len(w) < 5:
