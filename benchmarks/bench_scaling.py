@@ -33,9 +33,11 @@ def child(n: int, preset: str, mem_gb: float) -> None:
         lim = int(mem_gb * 2**30)
         resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
     sys.path.insert(0, str(ROOT))
+    from relight_addon.core.radiosity.memory import BASE_BYTES, estimate_precompute_memory
     from relight_addon.core.radiosity.precompute import solve_radiosity
     from scenes.testscenes import cornell_box
     scene = cornell_box(subdivide=n)
+    estimate = estimate_precompute_memory(scene, preset, proxy=False) / 2**20
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.perf_counter()
     try:
@@ -45,8 +47,9 @@ def child(n: int, preset: str, mem_gb: float) -> None:
         return
     total = time.perf_counter() - t0
     st = {k: (float(v) if isinstance(v, (float, np.floating)) else int(v)) for k, v in sol.stats().items()}
-    st.update(status="ok", seconds=total, rss_before_mb=rss0,
-              peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    st.update(status="ok", seconds=total, rss_before_mb=rss0, peak_rss_mb=peak,
+              estimate_mb=estimate, estimated_of_mb=peak - rss0 + BASE_BYTES / 2**20)
     print(json.dumps(st))
 
 
@@ -99,20 +102,25 @@ def write_md(rows, args, load_before, load_after, path):
              f"after: {', '.join(f'{x:.2f}' for x in load_after)} (other processes were running, "
              "so absolute times are noisy). Core sources sha1 (relight_addon/core/**/*.py): "
              f"`{args.core}`.", "",
-             "Times in seconds; form_factors and visibility are parts of refine + final_links.", "",
+             "Times in seconds; form_factors and visibility are parts of refine + final_links. "
+             "*estimate*: the memory estimate the Precompute button checks (core/radiosity/"
+             "memory.py), and its ratio to what it estimates: the peak less the RSS before the "
+             "solve, plus its 60 MB for Python and numpy.", "",
              "| preset | n | patches | elements | leaves | links | setup | refine | form_factors | "
-             "visibility | final_links | solve | iters | total s | peak RSS MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "visibility | final_links | solve | iters | total s | peak RSS MB | estimate MB | "
+             "estimate / measured |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if r["status"] != "ok":
             lines.append(f"| {r['preset']} | {r['n']} | {r['patches_in']} | | | | | | | | | | | "
-                         f"{r['status']} ({r['seconds']:.0f} s) | |")
+                         f"{r['status']} ({r['seconds']:.0f} s) | | | |")
             continue
         lines.append(
             f"| {r['preset']} | {r['n']} | {r['patches']} | {r['elements']} | {r['leaves']} | "
             f"{r['links']} | " + " | ".join(fmt(r.get('t_' + p, 0.0), 3 if r.get('t_' + p, 0) < 1 else 1)
                                               for p in PHASES)
-            + f" | {r['iterations']} | {fmt(r['seconds'], 2)} | {fmt(r['peak_rss_mb'], 0)} |")
+            + f" | {r['iterations']} | {fmt(r['seconds'], 2)} | {fmt(r['peak_rss_mb'], 0)} | "
+            f"{fmt(r['estimate_mb'], 0)} | {fmt(r['estimate_mb'] / r['estimated_of_mb'], 2)} |")
     lines += ["", "## Fitted exponents (log-log least squares over the completed cases, "
               "patches >= 400)", "",
               "| preset | time ~ P^a | links ~ P^a | leaves ~ P^a | (peak RSS - baseline) ~ P^a |",

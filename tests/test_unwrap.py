@@ -1,5 +1,6 @@
-"""Bad input: relight.unwrap_missing (xatlas atlas for meshes without UVs) and the memory
-estimate that makes relight.precompute refuse a scene before solving.
+"""Bad input: relight.unwrap_missing (xatlas atlas for meshes without UVs) and
+relight.precompute's refusal of a scene over the memory limit (the estimate itself:
+test_memory_estimate.py).
 
 The add-on is registered as in test_precompute_operator.py (importlib, package ``relight_ext``)
 and its scene builder is reused for the precompute check.
@@ -16,8 +17,6 @@ pytest.importorskip("xatlas")
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_precompute_operator as tpo  # noqa: E402
 
-from relight_addon.core.radiosity.memory import estimate_precompute_memory  # noqa: E402
-from scenes.testscenes import cornell_box  # noqa: E402
 
 CUBE_V = [(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]
 CUBE_F = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
@@ -133,30 +132,6 @@ def test_unwrap_only_selected_and_idempotent(scene):
     assert np.array_equal(_uv_triangles(a.data, "RelightUV")[0], before)
 
 
-def test_memory_estimate_grows_with_preset_and_patches():
-    small = cornell_box(subdivide=1)
-    est = [estimate_precompute_memory(small, p) for p in ("draft", "medium", "high", "ultra")]
-    assert all(x < y for x, y in zip(est, est[1:])), est
-    sizes = [estimate_precompute_memory(cornell_box(subdivide=n), "draft", proxy=False)
-             for n in (3, 8, 25)]
-    assert all(x < y for x, y in zip(sizes, sizes[1:])), sizes
-    # Within the measured range of benchmarks/results/scaling.md (peak RSS draft 25: 1717 MB,
-    # medium 25: 2779 MB); the model is conservative (>= measured, < 2x).
-    big = cornell_box(subdivide=25)
-    for preset, measured in (("draft", 1717), ("medium", 2779)):
-        mb = estimate_precompute_memory(big, preset, proxy=False) / 2**20
-        assert measured <= mb < 2 * measured, (preset, mb)
-    # Solved on a proxy (a mesh of more faces than the preset's proxy needs), the estimate
-    # follows the proxy and the faces' own cost: 200k faces fit in a few GB where the solve on
-    # the faces themselves was estimated at 70 GB (issue 10).
-    scan = np.full(200_000, 100.0 / 200_000)
-    with_proxy = estimate_precompute_memory(scan, "medium") / 2**30
-    without = estimate_precompute_memory(scan, "medium", proxy=False) / 2**30
-    assert with_proxy < 4.0 < 20.0 < without, (with_proxy, without)
-    half = estimate_precompute_memory(scan[:100_000] * 2, "medium") / 2**30
-    assert half < with_proxy < half + 0.5                 # the faces' own cost still counts
-
-
 def test_precompute_refused_over_memory_limit(scene):
     tpo.build_scene()
     addon = bpy.context.preferences.addons.get(tpo.PKG)
@@ -197,22 +172,3 @@ def test_unwrap_non_planar_quads_stay_whole(scene):
     assert (np.abs(_signed_area(tris)) > 0).all()
     cover = _coverage(tris, 512)
     assert (cover > 1).sum() < 0.01 * (cover > 0).sum()
-
-
-def test_memory_estimate_counts_texels():
-    """The texel term follows the measured shadow-free peaks (office, 2 lamps, draft:
-    benchmarks/results/texel_scaling.md) from above: 693 MB at 1.17 M texels, where every
-    texel's direct light is kept, and within 25 % of 857 MB at 4.7 M and 1859 MB at 16.5 M
-    texels, cast and written block by block; and grows with the texture size."""
-    from scenes.office import office_geometry, office_scene_data
-    data = office_geometry(0, 2, 48)
-
-    def estimate(up):
-        tex = None if up == 1 else {s.name: np.kron(s.albedo, np.ones((up, up, 1), np.float32))
-                                    for s in data.surfaces}
-        return estimate_precompute_memory(office_scene_data(data, tex), "draft") / 2**20
-    e = {up: estimate(up) for up in (1, 8, 16, 30)}
-    assert e[1] < e[8] and e[16] < e[30]
-    assert 693 <= e[8] < 2 * 693, e
-    assert 857 <= e[16] < 1.25 * 857, e
-    assert 1859 <= e[30] < 1.25 * 1859, e

@@ -1,25 +1,32 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""A rough, conservative estimate of the peak memory of ``solve_radiosity`` (bpy-free).
+"""A conservative estimate of the peak memory of a precompute (bpy-free).
 
 Used before a precompute starts so that a scene too large for the machine is refused with a
-clear message instead of swapping or being killed.  The model is fitted on
-``benchmarks/results/scaling.md`` (cornell_box, draft and medium, 153 .. 10,625 patches):
+clear message instead of swapping or being killed.  It estimates what the precompute adds to
+the process (its arrays, the solver's, the threads' temporaries) over BASE_BYTES for Python,
+numpy and scipy; the scene already read is not counted.  Measured as ``ru_maxrss`` after the
+precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.md, scan.md).
 
 * leaves ``L``: every input patch is split in quadtree fashion while its elements stay larger
   than ``min_area * total area``.  Per patch that is at most ``4**floor(log4(a / (min_area*A)))``
   leaves (at least 1), and over the scene at most ``patches + 1 / min_area`` (the subdivided
   leaves each cover at least ``min_area`` of the total area).  This is an upper bound; the
-  refinement oracles usually stop earlier (measured: 0.5x the bound for medium at 153 patches,
-  1x for the fine meshes where leaves == patches).
-* links ``K ~ c * L * log2(L + 2)``, capped by the number of leaf pairs ``L (L - 1) / 2``.
-  Measured ``K / (L log2 L)``: scaling.md draft 0.9 .. 7, medium 3.6 .. 7.9; cornell.md
-  (17 patches) medium 2.6, high 2.0, ultra 3.7.  ``c = 6`` for every preset (the finer presets
-  raise the memory through the leaf count, not through more links per leaf).
-* bytes = BASE + LINK_BYTES * K + PATCH_BYTES * patches + LEAF_BYTES * L.  A least-squares fit
-  of peak RSS over the 12 benchmark cases gives about 1.8-2.0 kB per link and 140 kB per
-  input patch (cluster tree, visibility structures and the sparse factors of the solve) over a
-  ~60 MB baseline (Python + numpy + scipy); the fit is within -30 % .. +50 % of every measured
-  case.  ``LEAF_BYTES`` covers the per-element arrays of the subdivided leaves.
+  refinement oracles usually stop earlier.
+* the solve: ``SOLVE_BYTES[preset] = (fixed, per leaf, per patch)``: fixed + per leaf x L +
+  per patch x patches, and never less than a coarser preset's.  The links and their
+  leaf-level entries per leaf depend on the scene (at medium a Cornell box of 10,625 patches
+  has 54 links a leaf, RenderPark's office 178, family room 0 as a 5,700-face scan 260) and
+  on the preset (entries per link grow with the quadrature and the source split), so each
+  preset has its own line, fitted 15 % above the upper envelope of 46 measured solves
+  (/proc's high-water mark, or ru_maxrss, after minus before, plus BASE_BYTES; the same
+  solve's peak varies by +-12 % from run to run): Cornell boxes of 17 to 10,625 patches at
+  every preset (ultra: 17 and 153; draft and medium twice), RenderPark's office (draft,
+  medium), family room 0 clean (35 quads), as a scan solved directly (3,600 faces at draft,
+  5,700 at medium and high) and on a proxy (100k and 200k faces).  Over them the estimate
+  is, where the measured peak is above 250 MB: draft 1.15-1.7x, medium 1.15-1.5x, high
+  1.15-2.9x (the 5,700-face scan needed 400 kB a patch, 3.4 M links for 5,869 leaves;
+  Cornell boxes of 1k-10k patches 2-3x less), ultra 1.15x; below it up to 270 MB too much.
+  The scan of 100k faces: draft and medium 1.15x, high 2.2x.
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
   faces) is estimated as the proxy's solve plus ``FACE_BYTES`` per input face.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
@@ -44,10 +51,11 @@ import numpy as np
 from .presets import PROXY_FACTOR, get_preset
 
 BASE_BYTES = 60 * 2**20
-LINK_BYTES = 2 * 1024
-PATCH_BYTES = 144 * 1024
-LEAF_BYTES = 8 * 1024
-LINKS_PER_LEAF_LOG = 6.0
+# the solve: fixed, per leaf (bound) and per patch bytes of each preset (module docstring)
+SOLVE_BYTES = {"draft": (235 * 2**20, 0, 71 * 2**10),
+               "medium": (86 * 2**20, 144 * 2**10, 34 * 2**10),
+               "high": (630 * 2**20, 0, 400 * 2**10),
+               "ultra": (572 * 2**20, 37 * 2**10, 0)}
 TEXEL_BYTES = 200
 TEXEL_LAMP_BYTES = 250
 RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.TEXEL_CHUNK)
@@ -72,8 +80,22 @@ def estimate_leaves(areas, min_area_fraction) -> float:
     return min(per_patch, len(areas) + 1.0 / min_area_fraction)
 
 
-def estimate_links(leaves) -> float:
-    return min(LINKS_PER_LEAF_LOG * leaves * math.log2(leaves + 2.0), leaves * (leaves - 1.0) / 2.0)
+def solve_bytes(quality, areas) -> float:
+    """The solve's bytes on patches of ``areas``: the largest of the lines of the preset and
+    of the coarser ones (a finer preset never needs less).  A preset of another name is
+    counted as the named one whose smallest element is nearest to its own."""
+    from .presets import PRESETS
+    order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
+    name = quality.name if quality.name in SOLVE_BYTES else min(
+        order, key=lambda k: abs(math.log(PRESETS[k].min_area / quality.min_area)))
+    patches = int(np.count_nonzero(np.asarray(areas) > 0))
+    out = 0.0
+    for k in order[:order.index(name) + 1]:
+        fixed, per_leaf, per_patch = SOLVE_BYTES[k]
+        min_area = quality.min_area if k == name else PRESETS[k].min_area
+        leaves = estimate_leaves(areas, min_area)
+        out = max(out, fixed + per_leaf * leaves + per_patch * patches)
+    return out
 
 
 def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) -> int:
@@ -96,13 +118,10 @@ def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) ->
     if proxy and patches > PROXY_FACTOR * faces:
         # the proxy's triangles are unknown before decimation: as many equal ones
         solve_areas = np.full(faces, float(np.sum(areas)) / faces)
-        solve_patches = faces
         full = FACE_BYTES * patches
     else:
-        solve_areas, solve_patches, full = areas, patches, 0
-    leaves = estimate_leaves(solve_areas, quality.min_area)
-    links = estimate_links(leaves)
-    total = BASE_BYTES + LINK_BYTES * links + PATCH_BYTES * solve_patches + LEAF_BYTES * leaves
+        solve_areas, full = areas, 0
+    total = BASE_BYTES + solve_bytes(quality, solve_areas)
     return int(total + full + estimate_texel_memory(scene_data))
 
 
