@@ -57,3 +57,38 @@ def test_restrict_keeps_the_chosen_entries_in_their_rows():
     dense[:, np.arange(n) % 3 != 0] = 0
     assert np.allclose(sub.matrix(sub.FV, n).toarray(), dense)
     assert sub.n_entries == keep.sum()
+
+
+def test_rows_sorted_range_by_range_are_the_rows_sorted_at_once():
+    """from_entries moves the entries block by block into ranges of rows (so that the entries
+    and the rows are never both whole): any blocks and ranges give the same arrays, bit for
+    bit, as one block and one range; an empty range of rows is kept."""
+    rng = np.random.default_rng(2)
+    leaves, g, n = _entries(rng, n_entries=5000, n_elements=300)
+    leaves = np.union1d(leaves, np.setdiff1d(np.arange(0, n, 7), leaves))   # rows with none
+    fields = (g.leaf.copy(), g.source.copy(), g.F.copy(), g.FV.copy())
+    whole = GatherRows.from_entries(leaves, g, n, ranges=1, block=1 << 20)
+    for ranges, block in ((3, 7), (16, 1000), (40, 64)):
+        g = LeafGather.of(*(f.copy() for f in fields))
+        rows = GatherRows.from_entries(leaves, g, n, ranges=ranges, block=block)
+        assert g.leaf is None and g.FV is None
+        for key in ("indptr", "source", "F", "FV"):
+            assert np.array_equal(getattr(rows, key), getattr(whole, key)), (ranges, block, key)
+    assert np.allclose(whole.matrix(whole.FV, n).toarray(),
+                       _dense(leaves, fields[0], fields[1], fields[3], n))
+
+
+def test_resized_keeps_the_items_and_leaves_views_alone():
+    """memory.resized grows and shrinks an array that owns its buffer in place (realloc), and
+    copies one that does not (a view: its base must stay whole)."""
+    from relight_addon.core.radiosity.memory import resized
+    a = np.arange(10.0)
+    b = resized(a, 15)
+    assert len(b) == 15 and np.array_equal(b[:10], np.arange(10.0))
+    c = resized(b, 4)
+    assert np.array_equal(c, np.arange(4.0))
+    base = np.arange(20)
+    view = base[5:15]
+    grown = resized(view, 12)
+    assert len(grown) == 12 and np.array_equal(grown[:10], np.arange(5, 15))
+    assert len(base) == 20 and np.array_equal(base, np.arange(20))

@@ -120,9 +120,9 @@ def conserve_rows(leaves, clusters, gather, front, other, rays, occluder_patch, 
         """The block of entries from ``a``: their leaf slots, whether they are counted, and
         whether their visibility was estimated.  In blocks: ~70 B of temporaries an entry
         peaked at GBs on RenderPark's office at medium (51 M entries)."""
-        FV, F = gather.FV[a:a + CONSERVE_BLOCK], gather.F[a:a + CONSERVE_BLOCK]
+        FV = gather.FV[a:a + CONSERVE_BLOCK]
         counted = occluder_patch[element_patch[gather.source[a:a + CONSERVE_BLOCK]]]
-        estimated = counted & (FV > 0) & ((F == 0) | (FV < F * (1.0 - 1e-9)))
+        estimated = counted & (FV > 0) & gather.estimated[a:a + CONSERVE_BLOCK]
         return np.searchsorted(leaves, gather.leaf[a:a + CONSERVE_BLOCK]), counted, estimated
 
     blocks = range(0, len(gather.leaf), CONSERVE_BLOCK)

@@ -8,7 +8,9 @@ they made most of a 5.1 GB peak.  Here they are sorted once into compressed rows
 built on these very arrays, so scaling a row scales the operator: 16 B an entry (a 4-byte source
 id, F V in float64 for the solve, the unoccluded F in float32: it only feeds the shadow-free
 ratios, where 1e-7 is far below any photo's noise).  Measured on the office at medium: peak
-RSS 5.1 -> 3.5 GB, the solution bit for bit the same (benchmarks/results/mgf.md).
+RSS 5.1 -> 3.5 GB, the solution bit for bit the same (benchmarks/results/mgf.md).  The sort
+itself goes range of rows by range of rows, the entries shrinking behind it (from_entries):
+sorted at once, the entries (20 B) and the rows being made (12 B) were the office's peak.
 """
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+
+from .memory import give_back_memory, resized
 
 INDEX = np.int32        # element ids: a hierarchy of 2^31 elements would not fit in memory anyway
 
@@ -30,27 +34,73 @@ class GatherRows:
     near: np.ndarray | None = None      # (h.n,) bool, as LeafGather.near
 
     @classmethod
-    def from_entries(cls, leaves, gather, n_elements: int):
+    def from_entries(cls, leaves, gather, n_elements: int, ranges: int = 16,
+                     block: int = 1 << 21):
         """Rows of a LeafGather (its arrays are released as they are sorted: ``gather`` is left
-        empty).  Entries with the same leaf and source are summed."""
+        empty).  Entries with the same leaf and source are summed.
+
+        The entries are moved, a block at a time from their end (each field shrunk in place
+        behind them), into ``ranges`` ranges of rows of about equal entry counts, and each
+        range is sorted on its own into the rows' arrays: the entries and the rows are never
+        both held whole (32 B an entry at once, the office's peak, where 20 are needed)."""
+        L = len(leaves)
         slot_of = np.full(n_elements, -1, INDEX)
-        slot_of[leaves] = np.arange(len(leaves), dtype=INDEX)
-        slot = slot_of[gather.leaf]
-        gather.leaf = None
-        shape = (len(leaves), n_elements)
-        source = gather.source.astype(INDEX, copy=False)
-        F = gather.F.astype(np.float32)
-        gather.source = gather.F = None
-        # scipy sorts into rows by counting (no argsort) and sums duplicates in place; the same
-        # pattern sorts the same way for any data, so F's rows line up with F V's
-        fv = sp.coo_matrix((gather.FV, (slot, source)), shape=shape).tocsr()
-        gather.FV = None
-        f = sp.coo_matrix((F, (slot, source)), shape=shape).tocsr()
-        del slot, source, F
-        if not (np.array_equal(f.indptr, fv.indptr) and np.array_equal(f.indices, fv.indices)):
-            raise AssertionError("the unoccluded rows did not sort like the occluded ones")
-        return cls(np.asarray(leaves), fv.indptr, fv.indices.astype(INDEX, copy=False),
-                   f.data, fv.data, gather.near)
+        slot_of[leaves] = np.arange(L, dtype=INDEX)
+        n = len(gather.leaf)
+        per_row = np.zeros(L, np.int64)
+        for a in range(0, n, block):
+            per_row += np.bincount(slot_of[gather.leaf[a:a + block]], minlength=L)
+        bounds = np.unique(np.concatenate([[0], np.searchsorted(
+            np.cumsum(per_row), np.linspace(0, n, ranges + 1)[1:-1]), [L]])).astype(INDEX)
+        fields = ("source", "F", "FV")
+        pieces = [[] for _ in range(len(bounds) - 1)]
+        gather.estimated = None
+        end = n
+        while end > 0:
+            a = max(0, end - block)
+            slot = slot_of[gather.leaf[a:end]]
+            part = np.searchsorted(bounds, slot, side="right") - 1
+            order = np.argsort(part, kind="stable")
+            cut = np.searchsorted(part[order], np.arange(len(pieces) + 1))
+            cols = [slot] + [getattr(gather, k)[a:end] for k in fields]
+            for r in np.flatnonzero(np.diff(cut)):
+                take = order[cut[r]:cut[r + 1]]
+                pieces[r].append([c[take] for c in cols])
+            del slot, part, order, cols
+            for key in ("leaf",) + fields:
+                setattr(gather, key, resized(getattr(gather, key), a))
+            end = a
+        gather.leaf = gather.source = gather.F = gather.FV = None
+        index = INDEX if n < 2**31 else np.int64
+        indptr = np.zeros(L + 1, index)
+        source, F, FV = np.empty(n, INDEX), np.empty(n, np.float32), np.empty(n)
+        at = 0
+        for r, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
+            got = pieces[r][::-1]                  # the entries' own order, within each row
+            pieces[r] = None
+            if not got:
+                indptr[lo + 1:hi + 1] = at
+                continue
+            slot, src, f_in, fv_in = (np.concatenate([g[i] for g in got]) for i in range(4))
+            del got
+            shape = (int(hi - lo), n_elements)
+            # scipy sorts into rows by counting and sums duplicates in place; the same pattern
+            # sorts the same way for any data, so F's rows line up with F V's
+            fv = sp.coo_matrix((fv_in, (slot - lo, src)), shape=shape).tocsr()
+            f = sp.coo_matrix((f_in.astype(np.float32, copy=False), (slot - lo, src)),
+                              shape=shape).tocsr()
+            del slot, src, f_in, fv_in
+            if not (np.array_equal(f.indptr, fv.indptr) and np.array_equal(f.indices, fv.indices)):
+                raise AssertionError("the unoccluded rows did not sort like the occluded ones")
+            m = fv.nnz
+            source[at:at + m], FV[at:at + m], F[at:at + m] = fv.indices, fv.data, f.data
+            indptr[lo + 1:hi + 1] = at + fv.indptr[1:]
+            at += m
+            del fv, f
+            # the pieces (~1 MB each) were freed into the heap, which keeps their pages
+            give_back_memory()
+        return cls(np.asarray(leaves), indptr, resized(source, at), resized(F, at),
+                   resized(FV, at), gather.near)
 
     @property
     def n_entries(self) -> int:

@@ -24,6 +24,7 @@ from ..geometry.sampling import (R2, area_uniform_uv, jacobian_coefficients, qua
                                  stratified_unit_square)
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
+from .memory import give_back_memory, resized
 
 VISIBLE, PARTIAL, INVISIBLE = 0, 1, 2
 
@@ -211,16 +212,33 @@ def _segment_ranges(starts, counts):
     return np.repeat(starts - offsets, counts) + np.arange(total)
 
 
+def visibility_estimated(F, FV):
+    """Entries whose visibility was estimated by rays (conserve.conserve_rows rescales only
+    those): partly hidden (F V below F beyond rounding), or gathered ray by ray (F = 0)."""
+    return (FV > 0) & ((F == 0) | (FV < F * (1.0 - 1e-9)))
+
+
 @dataclass
 class LeafGather:
     """Leaf-level transport of a link set: for every (link, leaf under its receiver) pair, the
     leaf's own form factor to the link's source (unoccluded, and with visibility)."""
     leaf: np.ndarray       # leaf element id
     source: np.ndarray     # source element id (a source leaf for ray-level entries)
-    F: np.ndarray          # unoccluded, integrated over the leaf's own Gauss points
+    # unoccluded, integrated over the leaf's own Gauss points; float32, as in the rows kept
+    # (gather_rows): whether an entry's visibility was estimated is told by ``estimated``,
+    # decided where F and F V are made in float64 (51 M entries on RenderPark's office at
+    # medium: 3 B an entry less at the peak)
+    F: np.ndarray
     FV: np.ndarray         # with visibility (sums of entries per leaf give its transport)
     # (h.n,) bool: the leaves integrated on their m x m Gauss points (the others at their centre)
     near: np.ndarray | None = None
+    estimated: np.ndarray | None = None    # bool per entry: visibility_estimated(F, FV)
+
+    def __post_init__(self):
+        if self.estimated is None:
+            self.estimated = visibility_estimated(np.asarray(self.F, float),
+                                                  np.asarray(self.FV, float))
+        self.F = np.asarray(self.F).astype(np.float32, copy=False)
 
     @classmethod
     def of(cls, leaf, source, F, FV, near=None):
@@ -289,7 +307,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     pair_start = np.concatenate([[0], np.cumsum(count[r])])
     n_pair_entries = int(pair_start[-1]) if with_leaves else 0
     gather = LeafGather(np.empty(n_pair_entries, np.int32), np.empty(n_pair_entries, np.int32),
-                        np.empty(n_pair_entries), np.empty(n_pair_entries), leaf_near)
+                        np.empty(n_pair_entries, np.float32), np.empty(n_pair_entries), leaf_near,
+                        np.empty(n_pair_entries, bool))
 
     def process(links, chunk_rng):
         """One chunk of links; writes its rows of F, Fv, seen_* and its pairs' gather entries,
@@ -357,6 +376,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         if occluder is None or rays <= 0:
             gather.leaf[at], gather.source[at] = leaf_ids, ls[link_of]
             gather.F[at] = gather.FV[at] = pair_F
+            gather.estimated[at] = False
             return chunk_parts
         # Partially visible links gather from the source leaf each free ray lands in, rather
         # than from the source's mean radiosity: a hidden part of a source is often dark too
@@ -367,6 +387,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         pair_FV = np.bincount(pair_pt, np.where(by_ray, 0.0, W * f * free_frac), n_pairs) / pw
         gather.leaf[at], gather.source[at] = leaf_ids, ls[link_of]
         gather.F[at], gather.FV[at] = pair_F, pair_FV
+        gather.estimated[at] = visibility_estimated(pair_F, pair_FV)
         use = free & by_ray[ray_pt]
         if use.any():
             rp = ray_pt[use]
@@ -395,9 +416,17 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     vis = np.where(seen_blocked, np.where(seen_free, PARTIAL, INVISIBLE), VISIBLE).astype(np.int8)
     if not with_leaves:
         return F, V, vis
-    for key in ("leaf", "source", "F", "FV"):          # one field at a time
-        setattr(gather, key, np.concatenate([getattr(gather, key)]
-                                            + [getattr(p, key) for p in parts]))
+    # the rays' entries after the pairs', one field at a time, each grown in place (joined,
+    # the office's 51 M entries were held twice while a field was copied)
+    n_entries = n_pair_entries + sum(len(p.leaf) for p in parts)
+    for key in ("leaf", "source", "F", "FV", "estimated"):
+        field = resized(getattr(gather, key), n_entries)
+        at = n_pair_entries
         for p in parts:
+            part = getattr(p, key)
+            field[at:at + len(part)] = part
+            at += len(part)
             setattr(p, key, None)
+        setattr(gather, key, field)
+        give_back_memory()      # the parts' pages (small arrays, freed into the heap)
     return F, V, vis, gather

@@ -162,3 +162,21 @@ def _malloc_trim():
         return ctypes.CDLL("libc.so.6").malloc_trim
     except (OSError, AttributeError):          # not glibc (musl)
         return None
+
+
+def resized(array, n):
+    """``array`` (1-D) grown or shrunk to ``n`` items, in place when numpy owns its buffer:
+    realloc moves a large buffer's pages (mremap) instead of copying them, so a 400 MB array
+    grown by its tail is not held twice, as np.concatenate would hold it, and a shrunk one
+    gives its tail back.  No view of ``array`` may be alive (it would point at freed memory).
+    New items are uninitialised."""
+    if array.flags.owndata and array.base is None and array.flags.c_contiguous and array.ndim == 1:
+        try:
+            array.resize(n, refcheck=False)
+            return array
+        except (ValueError, MemoryError):
+            pass
+    out = np.empty(n, array.dtype)
+    k = min(n, len(array))
+    out[:k] = array[:k]
+    return out

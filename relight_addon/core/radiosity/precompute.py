@@ -492,6 +492,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     report(0.7, f"Form factors and visibility for {kept.n} links")
     receiver, source = kept.receiver, kept.source
     del kept                            # the oracle's estimates: 77 B a link
+    give_back_memory()
     with timer("final_links"):
         F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..geometry.formfactor import point_to_polygon
 from ..geometry.sampling import quadrature
+from .memory import resized
 
 _CHUNK = 20_000          # entries whose children's form factors are computed at once
 _PICK_BLOCK = 1 << 20
@@ -53,16 +54,16 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         keep[pick] = False
         n_keep = len(keep) - len(pick)
 
-        def grown(old, children=None):
-            """The kept entries of ``old`` then room for 4 children a pick (``children`` or
-            filled below), the kept part copied in blocks (np.compress makes an index array);
-            the old array is released as its successor is made."""
-            out = np.empty(n_keep + 4 * len(pick), old.dtype)
+        def grown(field, children=None):
+            """``field``'s kept entries moved to its front in blocks (np.compress would make
+            an index array), then room for 4 children a pick (``children`` or filled below):
+            in place (memory.resized), so no field is ever held twice."""
             at = 0
-            for a in range(0, len(old), _PICK_BLOCK):
-                kept = old[a:a + _PICK_BLOCK][keep[a:a + _PICK_BLOCK]]
-                out[at:at + len(kept)] = kept
+            for a in range(0, len(field), _PICK_BLOCK):
+                kept = field[a:a + _PICK_BLOCK][keep[a:a + _PICK_BLOCK]]
+                field[at:at + len(kept)] = kept
                 at += len(kept)
+            out = resized(field, n_keep + 4 * len(pick))
             if children is not None:
                 out[n_keep:] = children
             return out
@@ -70,6 +71,8 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         gather.source = grown(gather.source, (child[:, None] + np.arange(4)).ravel())
         gather.F = grown(gather.F)
         gather.FV = grown(gather.FV)
+        # a child's F V / F is its parent's: so is whether its visibility was estimated
+        gather.estimated = grown(gather.estimated, np.repeat(gather.estimated[pick], 4))
 
         def fill(c):
             """The children's entries of the picks ``c`` (a slice), written in place: the
