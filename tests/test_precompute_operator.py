@@ -381,7 +381,9 @@ def test_worker_job_and_display_maps():
         assert coverage.mean() > 0.9                 # unit squares / a 3 x 2 atlas
         lit = np.abs(total - 1) < 1e-5
         assert np.all(lit | (total == 0))
-        assert lit.mean() > 0.9
+        # (the box's bottom face lies on the floor: no light reaches it, and its cell is 1/6 of
+        # the box's atlas; it read lit only while a coarse gather leaked the floor's mean to it)
+        assert lit.mean() > 0.8
     # the D floor: an all-dark solution and a single bright leaf give M_k = 0, never NaN/Inf
     import dataclasses
     dark = dataclasses.replace(sol, basis=np.zeros_like(sol.basis))

@@ -65,12 +65,16 @@ def back_copies(scene):
     return out
 
 
-def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs):
+def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs, at_centre=None):
     """Per leaf (L,): the fractions of cosine-weighted rays from random points of the leaf that
     first meet the front of a source of ``scene`` (a patch that reflects or emits, or the back
     copy of a two-sided face met from behind: ``backs``, from ``back_copies``), and that meet
     anything else (a back, a black surface, a surface touching the leaf).  ``occluder`` knows
-    the patch of each triangle (``patch_of_triangle``)."""
+    the patch of each triangle (``patch_of_triangle``).  ``at_centre`` (L,) bool: leaves that
+    gather at their centre (every leaf at draft), whose rays all leave from it: their row is
+    that point's view (a floor leaf by a box on the floor, its centre in the open: rays from
+    random points under the box left it unclosed, and one ray that found a panel in front of
+    the ceiling cost its row 23 %, its neighbours 26 % at rho 0.99)."""
     L = len(leaves)
     front = np.zeros(L)
     other = np.zeros(L)
@@ -87,6 +91,9 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs):
     for a in range(0, L, chunk):
         b = min(a + chunk, L)
         u, v, x1, x2 = rng.random((4, b - a, rays, 1))
+        if at_centre is not None:
+            u = np.where(at_centre[a:b, None, None], 0.5, u)
+            v = np.where(at_centre[a:b, None, None], 0.5, v)
         cc = c[a:b, None]
         P = (cc[..., 0, :] + u * (cc[..., 1, :] - cc[..., 0, :]) + v * (cc[..., 3, :] - cc[..., 0, :])
              + u * v * (cc[..., 0, :] - cc[..., 1, :] + cc[..., 2, :] - cc[..., 3, :]))

@@ -496,7 +496,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     with timer("final_links"):
         F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,
-                                               timer=timer)
+                                               timer=timer, ff_m=q.ff_quadrature)
         give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
         give_back_memory()
@@ -504,7 +504,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     with timer("conserve"):
         system, gather = _final_system(h, gather, (tree, cX, cY, cV), occluder, seed, scale,
-                                       scene)
+                                       scene, q.quadrature)
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
@@ -535,12 +535,12 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     links = solution.links
     F, V, vis, gather = final_form_factors(h, links.receiver, links.source, ctx.get("occluder"),
                                            q.quadrature, q.rays, rng, ctx.get("scale", 1.0),
-                                           with_leaves=True)
+                                           with_leaves=True, ff_m=q.ff_quadrature)
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
     system, gather = _final_system(h, gather, ctx.get("clusters", (None, (), (), ())),
                                    ctx.get("occluder"), seed, ctx.get("scale", 1.0),
-                                   solution.scene)
+                                   solution.scene, q.quadrature)
     solution.gather = gather
     _expose(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
             solution.scene, q)
@@ -552,13 +552,13 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     return solution
 
 
-def _final_system(h, gather, clusters, occluder, seed, scale, scene):
+def _final_system(h, gather, clusters, occluder, seed, scale, scene, m):
     """The leaf system of the final form factors: rows conserved, then stored once (gather_rows:
     the solver's matrix shares their arrays).  Returns (system, GatherRows); empties ``gather``."""
     leaves = h.leaves()
     tree, cX, cY, cV = clusters
     low_rank = cluster_operator(tree, h, leaves, cX, cY, cV) if len(cX) else None
-    _conserve(h, leaves, low_rank, gather, occluder, seed, scale, scene)
+    _conserve(h, leaves, low_rank, gather, occluder, seed, scale, scene, m)
     rows = GatherRows.from_entries(leaves, gather, h.n)
     give_back_memory()
     system = LeafSystem.from_rows(h, rows, scene.rho)
@@ -567,15 +567,18 @@ def _final_system(h, gather, clusters, occluder, seed, scale, scene):
     return system, rows
 
 
-def _conserve(h, leaves, clusters, gather, occluder, seed, scale, scene):
+def _conserve(h, leaves, clusters, gather, occluder, seed, scale, scene, m):
     """No leaf gathers more than the part of its hemisphere that sees sources (conserve.py).
-    Needs a ray caster that knows its triangles' patches (``SceneData.make_occluder``)."""
+    Needs a ray caster that knows its triangles' patches (``SceneData.make_occluder``).  ``m``:
+    the quadrature of the leaves ``gather.near`` marks; the others gather at their centre."""
     if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
         return
     rng = np.random.default_rng([int(seed), 0xC0E5])      # its own stream: the rest is unchanged
     backs = back_copies(scene)
+    at_centre = np.ones(len(leaves), bool) if gather.near is None or m <= 1 \
+        else ~gather.near[leaves]
     front, back = hemisphere_coverage(h, leaves, occluder, scene, COVERAGE_RAYS, rng, scale,
-                                      backs)
+                                      backs, at_centre)
     counted = scene.occluder.copy()
     counted[backs[backs >= 0]] = True
     conserve_rows(leaves, clusters, gather, front, back, COVERAGE_RAYS, counted, h.patch)

@@ -15,6 +15,14 @@ is the element's: the contour integral is additive), the visibility factor kept;
 times, while the source is near (its radius above ``near`` x its distance to the leaf), where
 the form factor varies across it.  Entries of source leaves, and those whose rays gathered from
 the source leaves they reached (partly visible links), are left as they are.
+
+Where the leaf's points are farther apart than a child is wide (a leaf gathering at its centre,
+larger than the children), each child's share is taken the other way round, A_c F(c's centre ->
+the leaf's polygon) (reciprocity: A_l F_lc = A_c F_cl), exact over the leaf: its point alone
+gives shares that alias a source's near part.  In a closed cube at rho 0.99 with one wall
+emitting (draft) the point shares put 30 % more or less on the leaves nearest to a whole wall's
+centre (2 x 2 points: 13-19 %), each wall's light landing where that wall's points looked, and
+the emitted power came out 1.1 % off; the reciprocal shares leave 0.02 %.
 """
 from __future__ import annotations
 
@@ -102,12 +110,23 @@ def _to_split(h, gather, a, b, radius, near):
 
 def _child_shares(h, leaf, first_child, on_points, m):
     """(n, 4): each child's part of its parent's form factor from the leaf (its quadrature
-    points where ``on_points``, else its centre); a quarter each where the parent's is 0."""
+    points where ``on_points``, else its centre; the reciprocal A_c F(child's centre -> leaf)
+    where those points are farther apart than a child is wide); a quarter each where the
+    parent's is 0."""
     n = len(leaf)
     F = np.zeros((n, 4))
     kids = first_child[:, None] + np.arange(4)                         # (n, 4)
+    spacing = _radius(h, leaf) / np.where(on_points[leaf] & (m > 1), m, 1)
+    reciprocal = spacing > _radius(h, first_child)
+    rows = np.flatnonzero(reciprocal)
+    if len(rows):
+        k = kids[rows].reshape(-1)
+        f = point_to_polygon(h.centroid[k], h.normal[k],
+                             np.repeat(h.corners[leaf[rows]], 4, axis=0),
+                             np.repeat(h.normal[leaf[rows]], 4, axis=0))
+        F[rows] = (f * h.area[k]).reshape(len(rows), 4)
     for use_points in (True, False):
-        rows = np.flatnonzero(on_points[leaf] == use_points)
+        rows = np.flatnonzero((on_points[leaf] == use_points) & ~reciprocal)
         if len(rows) == 0:
             continue
         if use_points and m > 1:
@@ -122,3 +141,8 @@ def _child_shares(h, leaf, first_child, on_points, m):
         F[rows] = (f * w[:, None, :]).sum(axis=2)
     total = F.sum(axis=1, keepdims=True)
     return np.where(total > 0, F / np.where(total > 0, total, 1.0), 0.25)
+
+
+def _radius(h, elements):
+    """The distance from each element's centre to its farthest corner."""
+    return np.linalg.norm(h.corners[elements] - h.centroid[elements][:, None], axis=2).max(axis=1)
