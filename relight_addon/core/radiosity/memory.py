@@ -12,21 +12,23 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   leaves (at least 1), and over the scene at most ``patches + 1 / min_area`` (the subdivided
   leaves each cover at least ``min_area`` of the total area).  This is an upper bound; the
   refinement oracles usually stop earlier.
-* the solve: ``SOLVE_BYTES[preset] = (fixed, per leaf, per patch)``: fixed + per leaf x L +
-  per patch x patches, and never less than a coarser preset's.  The links and their
+* the solve: ``SOLVE_BYTES[preset] = (fixed, per leaf, per patch, at most)``: fixed + per
+  leaf x L + per patch x patches, or ``at most`` x L where that is less (draft: below ~1,000
+  patches, where its memory grows from nothing rather than from the fixed part), and never less
+  than a coarser preset's.  The links and their
   leaf-level entries per leaf depend on the scene (at medium a Cornell box of 10,625 patches
   has 54 links a leaf, RenderPark's office 178, family room 0 as a 5,700-face scan 260) and
   on the preset (entries per link grow with the quadrature and the source split), so each
-  preset has its own line, fitted 15 % above the upper envelope of 46 measured solves
+  preset has its own line, fitted 15 % above the upper envelope of 40 measured solves
   (/proc's high-water mark, or ru_maxrss, after minus before, plus BASE_BYTES; the same
   solve's peak varies by +-12 % from run to run): Cornell boxes of 17 to 10,625 patches at
-  every preset (ultra: 17 and 153; draft and medium twice), RenderPark's office (draft,
-  medium), family room 0 clean (35 quads), as a scan solved directly (3,600 faces at draft,
-  5,700 at medium and high) and on a proxy (100k and 200k faces).  Over them the estimate
-  is, where the measured peak is above 250 MB: draft 1.15-1.7x, medium 1.15-1.5x, high
-  1.15-2.9x (the 5,700-face scan needed 400 kB a patch, 3.4 M links for 5,869 leaves;
-  Cornell boxes of 1k-10k patches 2-3x less), ultra 1.15x; below it up to 270 MB too much.
-  The scan of 100k faces: draft and medium 1.15x, high 2.2x.
+  every preset (ultra: 17 and 153), RenderPark's office (draft, medium), family room 0 clean
+  (35 quads), as a scan solved directly (3,600 faces at draft, 5,700 at medium and high) and
+  on a proxy (100k and 200k faces).  Over them the estimate is, where the measured peak is
+  above 250 MB: draft 1.15-1.6x, medium 1.15-2.0x, high 1.15-2.7x (the 5,700-face scan
+  needed 3.4 M links for 5,869 leaves at high, 1.5 M at medium; the office at medium 178
+  links a leaf; Cornell boxes of 1k-10k patches 2-3x less), ultra 1.15x; below it up to
+  270 MB too much.  The scan of 100k faces: draft 1.2x, medium 1.25x, high 1.95x.
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
   faces) is estimated as the proxy's solve plus ``FACE_BYTES`` per input face.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
@@ -51,11 +53,12 @@ import numpy as np
 from .presets import PROXY_FACTOR, get_preset
 
 BASE_BYTES = 60 * 2**20
-# the solve: fixed, per leaf (bound) and per patch bytes of each preset (module docstring)
-SOLVE_BYTES = {"draft": (235 * 2**20, 0, 71 * 2**10),
-               "medium": (86 * 2**20, 144 * 2**10, 34 * 2**10),
-               "high": (630 * 2**20, 0, 400 * 2**10),
-               "ultra": (572 * 2**20, 37 * 2**10, 0)}
+# the solve: fixed, per leaf (bound) and per patch bytes of each preset, and at most so many
+# bytes a leaf (bound) where that is less: small scenes (module docstring)
+SOLVE_BYTES = {"draft": (298 * 2**20, 0, 73 * 2**10, 360 * 2**10),
+               "medium": (182 * 2**20, 51 * 2**10, 87 * 2**10, 0),
+               "high": (336 * 2**20, 37 * 2**10, 253 * 2**10, 0),
+               "ultra": (568 * 2**20, 36 * 2**10, 0, 0)}
 TEXEL_BYTES = 200
 TEXEL_LAMP_BYTES = 250
 RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.TEXEL_CHUNK)
@@ -91,10 +94,11 @@ def solve_bytes(quality, areas) -> float:
     patches = int(np.count_nonzero(np.asarray(areas) > 0))
     out = 0.0
     for k in order[:order.index(name) + 1]:
-        fixed, per_leaf, per_patch = SOLVE_BYTES[k]
+        fixed, per_leaf, per_patch, at_most = SOLVE_BYTES[k]
         min_area = quality.min_area if k == name else PRESETS[k].min_area
         leaves = estimate_leaves(areas, min_area)
-        out = max(out, fixed + per_leaf * leaves + per_patch * patches)
+        line = fixed + per_leaf * leaves + per_patch * patches
+        out = max(out, min(line, at_most * leaves) if at_most else line)
     return out
 
 
