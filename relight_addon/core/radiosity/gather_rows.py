@@ -34,7 +34,7 @@ class GatherRows:
     near: np.ndarray | None = None      # (h.n,) bool, as LeafGather.near
 
     @classmethod
-    def from_entries(cls, leaves, gather, n_elements: int, ranges: int = 16,
+    def from_entries(cls, leaves, gather, n_elements: int, ranges: int | None = None,
                      block: int = 1 << 21):
         """Rows of a LeafGather (its arrays are released as they are sorted: ``gather`` is left
         empty).  Entries with the same leaf and source are summed.
@@ -42,11 +42,15 @@ class GatherRows:
         The entries are moved, a block at a time from their end (each field shrunk in place
         behind them), into ``ranges`` ranges of rows of about equal entry counts, and each
         range is sorted on its own into the rows' arrays: the entries and the rows are never
-        both held whole (32 B an entry at once, the office's peak, where 20 are needed)."""
+        both held whole (32 B an entry at once, the office's peak, where 20 are needed).  By
+        default one range per 4 M entries, up to 16: a small gather (the Cornell box's 70k
+        entries) is sorted at once, in half the time."""
         L = len(leaves)
         slot_of = np.full(n_elements, -1, INDEX)
         slot_of[leaves] = np.arange(L, dtype=INDEX)
         n = len(gather.leaf)
+        if ranges is None:
+            ranges = int(min(16, 1 + n // (1 << 22)))
         per_row = np.zeros(L, np.int64)
         for a in range(0, n, block):
             per_row += np.bincount(slot_of[gather.leaf[a:a + block]], minlength=L)
