@@ -36,13 +36,15 @@ class SolveInfo:
 class LeafSystem:
     """The operator B -> rho * K B on the leaves of a hierarchy.
 
-    Built from leaf-level gather entries (leaf id, source element id, transport): the irradiance
-    of a leaf is sum over its entries of transport * (mean radiosity of the source element).
-    ``from_links`` expands a link set to that form by pushing each link down to the leaves under
-    its receiver (the classic push of a hierarchy).
+    Built on the leaves' gather, a (leaves, elements) matrix: the irradiance of a leaf is the sum
+    over its row of transport * (mean radiosity of the source element).  ``from_rows`` takes the
+    final gather's rows (gather_rows); ``from_links`` expands a link set to that form by pushing
+    each link down to the leaves under its receiver (the classic push of a hierarchy).
     """
 
-    def __init__(self, h: Hierarchy, leaf_ids, source, transport, rho_patch: np.ndarray):
+    def __init__(self, h: Hierarchy, M, rho_patch: np.ndarray):
+        """``M``: the (leaves, elements) CSR matrix of the leaves' gather, rows in
+        ``h.leaves()`` order."""
         self.leaves = h.leaves()
         L = len(self.leaves)
         n = h.n
@@ -53,9 +55,7 @@ class LeafSystem:
         # Pull: element value = area-weighted mean over its leaves.
         self.P_up = sp.csr_matrix((self.leaf_area[pos] / np.maximum(area[anc], 1e-300), (anc, pos)),
                                   shape=(n, L))
-        slot = np.full(n, -1, np.int64)
-        slot[self.leaves] = np.arange(L)
-        self.M = sp.csr_matrix((transport, (slot[leaf_ids], source)), shape=(L, n))
+        self.M = M
         self.rho = rho_patch[self.patch]                    # (L, 3)
         self.U = self.W = None                              # cluster links: H += U (W B)
         self.exposure = np.ones(L)                          # see set_exposure
@@ -64,9 +64,7 @@ class LeafSystem:
     def from_rows(cls, h: Hierarchy, rows, rho_patch, values=None):
         """On a gather stored by rows (gather_rows.GatherRows), its F V by default: the matrix
         holds the rows' own array (no copy), so scaling it in place scales the operator."""
-        system = cls(h, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), rho_patch)
-        system.M = rows.matrix(rows.FV if values is None else values, h.n)
-        return system
+        return cls(h, rows.matrix(rows.FV if values is None else values, h.n), rho_patch)
 
     @classmethod
     def from_links(cls, h: Hierarchy, receiver, source, transport, rho_patch):
@@ -74,8 +72,9 @@ class LeafSystem:
         pos, anc = h.ancestor_pairs(leaves)
         P_down = sp.csr_matrix((np.ones(len(pos)), (pos, anc)), shape=(len(leaves), h.n))
         G = sp.csr_matrix((transport, (receiver, source)), shape=(h.n, h.n))
-        M = (P_down @ G).tocoo()
-        return cls(h, leaves[M.row], M.col, M.data, rho_patch)
+        M = P_down @ G
+        M.sum_duplicates()          # canonical (sorted) rows, as built from entries before
+        return cls(h, M, rho_patch)
 
     def set_exposure(self, h: Hierarchy, exposure):
         """Sources at the radiosity of their exposed part (radiosity.exposure): an element's
