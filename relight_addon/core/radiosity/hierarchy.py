@@ -110,6 +110,11 @@ class Hierarchy:
     def leaves(self) -> np.ndarray:
         return np.flatnonzero(self.view("first_child") < 0)
 
+    def radius(self) -> np.ndarray:
+        """(n,) each element's distance from its centre to its farthest corner."""
+        return np.linalg.norm(self.view("corners") - self.view("centroid")[:, None],
+                              axis=2).max(axis=1)
+
     def ancestor_pairs(self, leaves: np.ndarray):
         """(leaf position, ancestor id) pairs, each leaf paired with itself and all ancestors."""
         rows, cols = [], []

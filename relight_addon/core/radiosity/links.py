@@ -306,7 +306,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     cs = h.view("corners")
     corner_a, edge_u, edge_v = cs[:, 0], cs[:, 1] - cs[:, 0], cs[:, 3] - cs[:, 0]
     twist = cs[:, 0] - cs[:, 1] + cs[:, 2] - cs[:, 3]
-    radius = np.linalg.norm(h.view("corners") - h.view("centroid")[:, None], axis=2).max(axis=1)
+    radius = h.radius()
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m

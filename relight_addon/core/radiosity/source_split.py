@@ -46,7 +46,7 @@ def split_sources(h, gather, m: int, near: float, levels: int):
     others gather at their centre).  Returns the number of entries split."""
     if levels <= 0 or len(gather.leaf) == 0:
         return 0
-    radius = np.linalg.norm(h.view("corners") - h.view("centroid")[:, None], axis=2).max(axis=1)
+    radius = h.radius()
     on_points = gather.near if gather.near is not None else np.zeros(h.n, bool)
     total = 0
     for _ in range(levels):
@@ -85,7 +85,7 @@ def split_sources(h, gather, m: int, near: float, levels: int):
         def fill(c):
             """The children's entries of the picks ``c`` (a slice), written in place: the
             shares (32 B a pick) are never all held at once."""
-            share = _child_shares(h, leaf[c], child[c], on_points, m)           # (n, 4)
+            share = _child_shares(h, leaf[c], child[c], on_points, m, radius)   # (n, 4)
             at = slice(n_keep + 4 * c.start, n_keep + 4 * (c.start + len(share)))
             gather.F[at] = (F_pick[c][:, None] * share).ravel()
             gather.FV[at] = (FV_pick[c][:, None] * share).ravel()
@@ -108,16 +108,16 @@ def _to_split(h, gather, a, b, radius, near):
                                                                  - h.centroid[src], axis=1)))
 
 
-def _child_shares(h, leaf, first_child, on_points, m):
+def _child_shares(h, leaf, first_child, on_points, m, radius):
     """(n, 4): each child's part of its parent's form factor from the leaf (its quadrature
     points where ``on_points``, else its centre; the reciprocal A_c F(child's centre -> leaf)
-    where those points are farther apart than a child is wide); a quarter each where the
-    parent's is 0."""
+    where those points are farther apart than a child is wide: ``radius``, Hierarchy.radius);
+    a quarter each where the parent's is 0."""
     n = len(leaf)
     F = np.zeros((n, 4))
     kids = first_child[:, None] + np.arange(4)                         # (n, 4)
-    spacing = _radius(h, leaf) / np.where(on_points[leaf] & (m > 1), m, 1)
-    reciprocal = spacing > _radius(h, first_child)
+    spacing = radius[leaf] / np.where(on_points[leaf] & (m > 1), m, 1)
+    reciprocal = spacing > radius[first_child]
     rows = np.flatnonzero(reciprocal)
     if len(rows):
         k = kids[rows].reshape(-1)
@@ -141,8 +141,3 @@ def _child_shares(h, leaf, first_child, on_points, m):
         F[rows] = (f * w[:, None, :]).sum(axis=2)
     total = F.sum(axis=1, keepdims=True)
     return np.where(total > 0, F / np.where(total > 0, total, 1.0), 0.25)
-
-
-def _radius(h, elements):
-    """The distance from each element's centre to its farthest corner."""
-    return np.linalg.norm(h.corners[elements] - h.centroid[elements][:, None], axis=2).max(axis=1)
