@@ -50,7 +50,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .presets import PROXY_FACTOR, get_preset
+from .presets import PRESETS, PROXY_FACTOR, get_preset
 
 BASE_BYTES = 60 * 2**20
 # the solve: fixed, per leaf (bound) and per patch bytes of each preset, and at most so many
@@ -87,7 +87,6 @@ def solve_bytes(quality, areas) -> float:
     """The solve's bytes on patches of ``areas``: the largest of the lines of the preset and
     of the coarser ones (a finer preset never needs less).  A preset of another name is
     counted as the named one whose smallest element is nearest to its own."""
-    from .presets import PRESETS
     order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
     name = quality.name if quality.name in SOLVE_BYTES else min(
         order, key=lambda k: abs(math.log(PRESETS[k].min_area / quality.min_area)))
