@@ -428,22 +428,44 @@ def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
     voting = (counts >= VOTE_MIN_PAIRS) & (best > 0) & (best < m - 1) & (info > 0)
     if not voting.any():
         return fallback, np.inf
-    lg = VOTE_GRID[best]
+    # Each piece's minimum between grid points (the parabola through its neighbours), and the
+    # median interpolated between the votes: on the grid alone the vote jumped a whole step
+    # (12 % in g, 12 % in the lamps' scale through rho^) with the solver's random seed.
+    lg = VOTE_GRID[best] + h * _parabola_vertex(f[VOTE_STEP - 1:VOTE_STEP + m - 1][best, cols],
+                                                centre[best, cols],
+                                                f[VOTE_STEP + 1:VOTE_STEP + m + 1][best, cols])
     # no piece weighs more than the typical one: the steepest pieces are where the model is
     # most often wrong (contact shadows), and would decide alone
     w = np.minimum(info[voting], np.median(info[voting]))
     order = np.argsort(lg[voting])
     votes, w = lg[voting][order], w[order]
-    cum = np.cumsum(w)
-    g = float(np.exp(votes[np.searchsorted(cum, 0.5 * cum[-1])]))
+    g = float(np.exp(_weighted_median(votes, w)))
     if len(votes) < VOTE_MIN_PIECES:
         return g, np.inf
     # how sure: the spread of the weighted median when the pieces are drawn again (seeded)
     draws = np.random.default_rng(5).multinomial(len(votes), np.full(len(votes), 1 / len(votes)),
                                                   size=VOTE_BOOTSTRAP) * w
-    cum = np.cumsum(draws, axis=1)
-    medians = votes[np.argmax(cum >= 0.5 * cum[:, -1:], axis=1)]
-    return g, max(float(medians.std()), 0.5 * (VOTE_GRID[1] - VOTE_GRID[0]))   # the grid's step
+    medians = _weighted_median(votes, draws)
+    return g, max(float(medians.std()), 0.5 * h)      # no surer than half the grid's step
+
+
+def _parabola_vertex(left, mid, right):
+    """Offset (in grid steps, within +-0.5) of the minimum of the parabola through three
+    equally spaced values whose middle one is the least."""
+    curv = left - 2.0 * mid + right
+    return np.clip(0.5 * (left - right) / np.where(curv > 0, curv, np.inf), -0.5, 0.5)
+
+
+def _weighted_median(values, weights):
+    """Weighted median of sorted ``values``, interpolated between them (each value stands
+    at the middle of its weight), so that it moves smoothly with the values and weights;
+    ``weights`` (n,) or (draws, n) for one median per row."""
+    w = np.atleast_2d(np.asarray(weights, float))
+    cum = np.cumsum(w, axis=1)
+    at = (cum - 0.5 * w) / np.maximum(cum[:, -1:], 1e-300)
+    out = np.array([np.interp(0.5, a[wr > 0], values[wr > 0]) if np.any(wr > 0) else values[0]
+                    for a, wr in zip(at, w)])
+    return out if np.ndim(weights) == 2 else float(out[0])
 
 
 def nnls_factors(sol, tm, photo, use_patch, current=None):
