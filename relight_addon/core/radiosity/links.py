@@ -44,6 +44,7 @@ _CHUNK_LINKS = 100_000
 _PARALLEL_LINKS = 20_000
 _THREADS = min(2, os.cpu_count() or 1)
 _CHUNK_POINTS = 100_000
+_RAY_BATCH = 1 << 17          # visibility rays traced at once in a chunk
 
 
 @dataclass
@@ -366,35 +367,51 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         else:
             per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
             ray_count = per_pt[link_pt]
-            ray_pt = np.repeat(np.arange(len(P)), ray_count)
-            ray_src = src[ray_pt]
+            ray_end = np.cumsum(ray_count)
             # The rays of one point follow an R2 low-discrepancy sequence with a random shift
             # (Cranley-Patterson), so few rays still cover the source evenly.
-            j = np.arange(len(ray_pt)) - np.repeat(np.cumsum(ray_count) - ray_count, ray_count)
-            shift = chunk_rng.random((len(P), 2))[ray_pt]
-            xi_u = np.mod(j * R2[0] + shift[:, 0], 1.0)[:, None]
-            xi_v = np.mod(j * R2[1] + shift[:, 1], 1.0)[:, None]
-            u, v = area_uniform_uv(None, xi_u, xi_v, tuple(j[ray_src] for j in jac))
-            uu, vv = u[:, :1], v[:, :1]
-            Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
-                 + (uu * vv) * twist[ray_src])
-            recv_el = lr[link_pt][ray_pt]
-            Pr = P[ray_pt]
-            kernel = point_kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
-            counts = kernel > 0
-            p0, q0 = _offset_segments(h, recv_el, ray_src, Pr, Q, scale)
-            with timer("visibility"):
-                blocked = occluder.segments_occluded(p0, q0)
-            free = counts & ~blocked
-            blocked &= counts
-            # Visible fraction weighted by the point-to-point kernel (a ratio estimator): the
-            # area fraction alone is biased where the hidden part of the source is nearer.
-            tried = np.bincount(ray_pt, kernel, len(P))
-            free_frac = np.where(tried > 0, np.bincount(ray_pt, kernel * free, len(P))
-                                 / np.where(tried > 0, tried, 1.0), 1.0)
-            link_ray = link_pt[ray_pt]
-            seen_free[links] |= np.bincount(link_ray, free, len(links)) > 0
-            seen_blocked[links] |= np.bincount(link_ray, blocked, len(links)) > 0
+            shift = chunk_rng.random((len(P), 2))
+            tried = np.zeros(len(P))
+            free_w = np.zeros(len(P))
+            n_free = np.zeros(len(links))          # rays per link: free, blocked
+            n_blocked = np.zeros(len(links))
+            free_rays = []
+            # in batches of whole points' rays (bit for bit the same sums): a chunk's rays and
+            # their ~250 B of temporaries each, in two threads, were the office's peak at medium
+            bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH)))
+            for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(P)]):
+                ray_a = ray_end[pt_a - 1] if pt_a > 0 else 0
+                ray = np.arange(ray_a, ray_end[pt_b - 1])
+                ray_pt = pt_a + np.searchsorted(ray_end[pt_a:pt_b], ray, side="right")
+                ray_src = src[ray_pt]
+                j = ray - (ray_end - ray_count)[ray_pt]
+                xi_u = np.mod(j * R2[0] + shift[ray_pt, 0], 1.0)[:, None]
+                xi_v = np.mod(j * R2[1] + shift[ray_pt, 1], 1.0)[:, None]
+                u, v = area_uniform_uv(None, xi_u, xi_v, tuple(c[ray_src] for c in jac))
+                uu, vv = u[:, :1], v[:, :1]
+                Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
+                     + (uu * vv) * twist[ray_src])
+                recv_el = lr[link_pt][ray_pt]
+                Pr = P[ray_pt]
+                kernel = point_kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
+                counts = kernel > 0
+                p0, q0 = _offset_segments(h, recv_el, ray_src, Pr, Q, scale)
+                with timer("visibility"):
+                    blocked = occluder.segments_occluded(p0, q0)
+                free = counts & ~blocked
+                blocked &= counts
+                # Visible fraction weighted by the point-to-point kernel (a ratio estimator):
+                # the area fraction alone is biased where the hidden part of the source is
+                # nearer.
+                tried += np.bincount(ray_pt, kernel, len(P))
+                free_w += np.bincount(ray_pt, kernel * free, len(P))
+                link_ray = link_pt[ray_pt]
+                n_free += np.bincount(link_ray, free, len(links))
+                n_blocked += np.bincount(link_ray, blocked, len(links))
+                free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
+            free_frac = np.where(tried > 0, free_w / np.where(tried > 0, tried, 1.0), 1.0)
+            seen_free[links] |= n_free > 0
+            seen_blocked[links] |= n_blocked > 0
         wsum = np.bincount(link_pt, W, len(links))
         F[links] = np.bincount(link_pt, W * f, len(links)) / np.maximum(wsum, 1e-300)
         Fv[links] = np.bincount(link_pt, W * f * free_frac, len(links)) / np.maximum(wsum, 1e-300)
@@ -410,18 +427,18 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         # Partially visible links gather from the source leaf each free ray lands in, rather
         # than from the source's mean radiosity: a hidden part of a source is often dark too
         # (floor under a box), and the mean would count that darkness a second time.
-        partial_link = (np.bincount(link_ray, blocked, len(links)) > 0) & (
-            np.bincount(link_ray, free, len(links)) > 0)
+        partial_link = (n_blocked > 0) & (n_free > 0)
         by_ray = partial_link[link_pt] & (tried > 0)
         pair_FV = np.bincount(pair_pt, np.where(by_ray, 0.0, W * f * free_frac), n_pairs) / pw
         gather.leaf[at], gather.source[at] = leaf_ids, ls[link_of]
         gather.F[at], gather.FV[at] = pair_F, pair_FV
         gather.estimated[at] = visibility_estimated(pair_F, pair_FV)
-        use = free & by_ray[ray_pt]
+        ray_pt, kernel, u, v = (np.concatenate(c) for c in zip(*free_rays))
+        use = by_ray[ray_pt]
         if use.any():
             rp = ray_pt[use]
             weight = W[rp] * f[rp] * kernel[use] / tried[rp] / pw[pair_pt[rp]]
-            src_leaf = h.locate(ray_src[use], u[use, 0], v[use, 0])
+            src_leaf = h.locate(src[rp], u[use], v[use])
             chunk_parts.append(LeafGather.of(leaf_ids[pair_pt[rp]], src_leaf, np.zeros(len(rp)),
                                              weight))
         return chunk_parts
