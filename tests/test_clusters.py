@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
+from relight_addon.core.radiosity import clusters
 from relight_addon.core.radiosity.clusters import (build_cluster_tree, cluster_operator,
-                                                   link_clusters)
+                                                   cluster_transport, link_clusters)
 from relight_addon.core.radiosity.hierarchy import Hierarchy
 from relight_addon.core.radiosity.precompute import solve_radiosity
 from relight_addon.core.radiosity.presets import PRESETS
@@ -71,6 +72,23 @@ def test_cluster_link_transport_converges_to_the_point_kernel():
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 0.02                                               # (r / d)^2 ~ 1 %
     assert errors[1] / errors[2] > 3                                      # about quadratic
+
+
+def test_cluster_transport_streamed_equals_the_factors_product(monkeypatch):
+    """conserve reads what the cluster links carry without building U and W (memory): block by
+    block it must give U @ (W @ B), here with blocks of 64 entries cutting links apart."""
+    corners = _random_quads(150, np.random.default_rng(4))
+    scene = SceneData(corners, 0.5, np.zeros((len(corners), 3)), np.full(len(corners), -1), [])
+    h = Hierarchy(scene)
+    tree = build_cluster_tree(corners, np.arange(len(corners)))
+    X, Y, _, _, _ = link_clusters(tree, 1.0)
+    V = np.random.default_rng(5).random(len(X))
+    B = np.random.default_rng(6).random(len(h.leaves()))
+    monkeypatch.setattr(clusters, "OPERATOR_BLOCK", 64)
+    U, W = cluster_operator(tree, h, h.leaves(), X, Y, V)
+    assert U.nnz > 20 * 64                                # many blocks, links cut between them
+    np.testing.assert_allclose(cluster_transport(tree, h, h.leaves(), X, Y, V, B), U @ (W @ B),
+                               rtol=1e-12)
 
 
 def test_clustered_cornell_box_matches_mitsuba():

@@ -192,53 +192,98 @@ def cluster_visibility(tree: ClusterTree, h: Hierarchy, X, Y, occluder, rays: in
 OPERATOR_BLOCK = 1 << 18
 
 
+class _Factors:
+    """The two sparse factors of the cluster links' transport on the leaves, H += U @ (W @ B),
+    entry by entry: U (L, k) holds a receiving leaf's cos(n_l, c_Y - x_l)+ / |c_Y - x_l|^2
+    x V_XY d^2 / pi, W (k, L) a sending leaf's cos(n_i, c_X - y_i)+ / |y_i - c_X|^2 x A_i.
+    Entries come grouped by link, a block at a time (their link, position and temporaries are
+    ~200 B an entry at once: the office's 10 M entries at medium made its peak when whole)."""
+
+    def __init__(self, tree: ClusterTree, h: Hierarchy, leaves: np.ndarray, X, Y, V):
+        self.L, self.k = len(leaves), len(X)
+        self.X, self.Y, self.tree = X, Y, tree
+        # Leaves grouped by their patch's position in the tree order: each node's leaves are a
+        # range (patches outside the tree, e.g. lamps, rank -1: under no node)
+        rank = np.full(max(int(tree.order.max()), int(h.patch[leaves].max())) + 1, -1, np.int64)
+        rank[tree.order] = np.arange(len(tree.order))
+        leaf_rank = rank[h.patch[leaves]]
+        self.by_rank = np.argsort(leaf_rank, kind="stable")
+        self.sorted_rank = leaf_rank[self.by_rank]
+        self.leaf_centroid, self.leaf_normal = h.centroid[leaves], h.normal[leaves]
+        self.leaf_area = h.area[leaves]
+        # Separable kernel: 1/|x - y|^2 ~ d^2 / (|x - c_Y|^2 |y - c_X|^2), exact when either
+        # point is at its cluster's centre, so the error is second order in radius / distance.
+        self.d2 = np.sum((tree.centre[Y] - tree.centre[X]) ** 2, axis=1)
+        self.V = V
+
+    def receiving(self):
+        return self.X, self.tree.centre[self.Y], self.d2 * self.V / np.pi, np.ones(self.L)
+
+    def sending(self):
+        return self.Y, self.tree.centre[self.X], np.ones(self.k), self.leaf_area
+
+    def pointers(self, nodes):
+        first = np.searchsorted(self.sorted_rank, self.tree.lo[nodes])
+        count = np.searchsorted(self.sorted_rank, self.tree.hi[nodes]) - first
+        return first, np.concatenate([[0], np.cumsum(count)])
+
+    def blocks(self, side):
+        """(entries slice, link, leaf slot, value) of one factor (``receiving()`` or
+        ``sending()``), a block at a time."""
+        nodes, centre, per_link, per_leaf = side
+        first, indptr = self.pointers(nodes)
+        n = int(indptr[-1])
+        for a in range(0, n, OPERATOR_BLOCK):
+            entry = np.arange(a, min(a + OPERATOR_BLOCK, n))
+            link = np.searchsorted(indptr, entry, side="right") - 1
+            leaf = self.by_rank[first[link] + (entry - indptr[link])]
+            x, nl, c = self.leaf_centroid[leaf], self.leaf_normal[leaf], centre[link]
+            dx, dy, dz = c[:, 0] - x[:, 0], c[:, 1] - x[:, 1], c[:, 2] - x[:, 2]
+            r2 = np.maximum(dx * dx + dy * dy + dz * dz, 1e-300)
+            cos = np.maximum(0.0, dx * nl[:, 0] + dy * nl[:, 1] + dz * nl[:, 2]) / np.sqrt(r2)
+            yield slice(a, a + len(entry)), link, leaf, cos / r2 * per_link[link] * per_leaf[leaf]
+
+    def compressed(self, side):
+        """(index pointer, leaf slot, value) of one factor: only the leaf slots (4 B) and the
+        values (8 B) are whole."""
+        _, indptr = self.pointers(side[0])
+        n = int(indptr[-1])
+        slot = np.empty(n, np.int32 if self.L < 2**31 else np.int64)
+        value = np.empty(n)
+        for at, _, leaf, v in self.blocks(side):
+            slot[at], value[at] = leaf, v
+        return indptr, slot, value
+
+
 def cluster_operator(tree: ClusterTree, h: Hierarchy, leaves: np.ndarray, X, Y, V):
     """Sparse factors (U, W) of the cluster links' transport on the leaves: H += U @ (W @ B)."""
     L = len(leaves)
     k = len(X)
     if k == 0:
         return sp.csr_matrix((L, 0)), sp.csr_matrix((0, L))
-    # Leaves grouped by their patch's position in the tree order: each node's leaves are a range.
-    # (patches outside the tree, e.g. lamps, rank -1: under no node)
-    rank = np.full(max(int(tree.order.max()), int(h.patch[leaves].max())) + 1, -1, np.int64)
-    rank[tree.order] = np.arange(len(tree.order))
-    leaf_rank = rank[h.patch[leaves]]
-    by_rank = np.argsort(leaf_rank, kind="stable")
-    sorted_rank = leaf_rank[by_rank]
-
-    def factor(nodes, centre, per_link, per_leaf):
-        """The entries of one factor, grouped by node (a link's cluster), each a leaf under the
-        node: (index pointer, leaf slot, value), where a value is cos(n_leaf, centre -
-        x_leaf)+ / |centre - x_leaf|^2 x per_link[link] x per_leaf[leaf].  Built in blocks:
-        only the leaf slots (4 B) and values (8 B) are whole (the entries' link, position and
-        temporaries, ~200 B an entry at once, made the office's peak at medium: 10 M entries)."""
-        first = np.searchsorted(sorted_rank, tree.lo[nodes])
-        count = np.searchsorted(sorted_rank, tree.hi[nodes]) - first
-        indptr = np.concatenate([[0], np.cumsum(count)])
-        n = int(indptr[-1])
-        slot = np.empty(n, np.int32 if L < 2**31 else np.int64)
-        value = np.empty(n)
-        for a in range(0, n, OPERATOR_BLOCK):
-            entry = np.arange(a, min(a + OPERATOR_BLOCK, n))
-            link = np.searchsorted(indptr, entry, side="right") - 1
-            leaf = by_rank[first[link] + (entry - indptr[link])]
-            x, nl, c = leaf_centroid[leaf], leaf_normal[leaf], centre[link]
-            dx, dy, dz = c[:, 0] - x[:, 0], c[:, 1] - x[:, 1], c[:, 2] - x[:, 2]
-            r2 = np.maximum(dx * dx + dy * dy + dz * dz, 1e-300)
-            cos = np.maximum(0.0, dx * nl[:, 0] + dy * nl[:, 1] + dz * nl[:, 2]) / np.sqrt(r2)
-            value[a:a + len(entry)] = cos / r2 * per_link[link] * per_leaf[leaf]
-            slot[a:a + len(entry)] = leaf
-        return indptr, slot, value
-
-    # Separable kernel: 1/|x - y|^2 ~ d^2 / (|x - c_Y|^2 |y - c_X|^2), exact when either point
-    # is at its cluster's centre, so the error is second order in radius / distance.
-    d2 = np.sum((tree.centre[Y] - tree.centre[X]) ** 2, axis=1)
-    leaf_centroid = h.centroid[leaves]
-    leaf_normal = h.normal[leaves]
+    f = _Factors(tree, h, leaves, X, Y, V)
     # Entries come grouped by link, so both factors are built directly in compressed form.
-    ptr_r, leaf_r, u = factor(X, tree.centre[Y], d2 * V / np.pi, np.ones(L))
+    ptr_r, leaf_r, u = f.compressed(f.receiving())
     U = sp.csc_matrix((u, leaf_r, ptr_r), shape=(L, k))
     del ptr_r, leaf_r, u
-    ptr_s, leaf_s, w = factor(Y, tree.centre[X], np.ones(k), h.area[leaves])
+    ptr_s, leaf_s, w = f.compressed(f.sending())
     W = sp.csr_matrix((w, leaf_s, ptr_s), shape=(k, L))
     return U, W
+
+
+def cluster_transport(tree: ClusterTree, h: Hierarchy, leaves: np.ndarray, X, Y, V, B):
+    """U @ (W @ B) of ``cluster_operator`` without holding U or W: what every leaf gathers
+    through the cluster links from the per-leaf values ``B`` (L,).  Costs what building the
+    factors costs; conserve needs only this one product, before the leaf gather is stored as
+    rows (with the factors held there too, the office at medium peaked 374 MB higher)."""
+    L, k = len(leaves), len(X)
+    if k == 0:
+        return np.zeros(L)
+    f = _Factors(tree, h, leaves, X, Y, V)
+    per_link = np.zeros(k)
+    for _, link, leaf, w in f.blocks(f.sending()):
+        per_link += np.bincount(link, w * B[leaf], k)
+    out = np.zeros(L)
+    for _, link, leaf, u in f.blocks(f.receiving()):
+        out += np.bincount(leaf, u * per_link[link], L)
+    return out

@@ -111,11 +111,13 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs, at_
     return front, other
 
 
-def conserve_rows(leaves, clusters, gather, front, other, rays, occluder_patch, element_patch):
+def conserve_rows(leaves, cluster_gather, gather, front, other, rays, occluder_patch,
+                  element_patch):
     """Scale ``gather.FV`` (a LeafGather; in place) so that every leaf's row meets its hemisphere
     coverage ``front`` (see the module's docstring); returns the per-leaf factor on the
-    estimated entries.  ``leaves``: the leaf ids, the rows' order; ``clusters``: the (U, W) of
-    cluster links (clusters.cluster_operator) or None.  ``occluder_patch`` (per patch): whether
+    estimated entries.  ``leaves``: the leaf ids, the rows' order; ``cluster_gather``: what
+    each leaf gathers through the cluster links from a per-leaf vector (a function: e.g.
+    clusters.cluster_transport) or None.  ``occluder_patch`` (per patch): whether
     its entries are counted (it blocks rays, or it is the back copy of a face that does:
     ``back_copies``); others (an area light's patch) are seen through the surfaces the
     coverage counts: neither counted nor changed.  Cluster links (far, approximate) are counted
@@ -140,9 +142,8 @@ def conserve_rows(leaves, clusters, gather, front, other, rays, occluder_patch, 
         fixed += np.bincount(slot, np.where(counted & ~estimated, FV, 0.0), L)
         estim += np.bincount(slot, np.where(estimated, FV, 0.0), L)
     from_clusters = np.zeros(L)
-    if clusters is not None:
-        U, W = clusters
-        from_clusters = U @ (W @ occluder_patch[element_patch[leaves]].astype(float))
+    if cluster_gather is not None:
+        from_clusters = cluster_gather(occluder_patch[element_patch[leaves]].astype(float))
     rows = fixed + estim + from_clusters
     # Every ray met a source's front: the target is exact (a closed view), the row must be 1.
     # Elsewhere the coverage is only a binomial estimate, worse than the row's own form factors

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -21,7 +22,8 @@ from ..geometry.raycast import ray_offset
 from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
 from ..scene import SceneData, bilinear_point
-from .clusters import build_cluster_tree, cluster_operator, cluster_visibility, link_clusters
+from .clusters import (build_cluster_tree, cluster_operator, cluster_transport,
+                       cluster_visibility, link_clusters)
 from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage
 from .contacts import contact_segments, split_at_contacts
 from .exposure import leaf_exposure
@@ -557,17 +559,19 @@ def _final_system(h, gather, clusters, occluder, seed, scale, scene, m):
     the solver's matrix shares their arrays).  Returns (system, GatherRows); empties ``gather``."""
     leaves = h.leaves()
     tree, cX, cY, cV = clusters
-    low_rank = cluster_operator(tree, h, leaves, cX, cY, cV) if len(cX) else None
-    _conserve(h, leaves, low_rank, gather, occluder, seed, scale, scene, m)
+    # the cluster links' factors are built once the entries are rows: conserve needs only
+    # their row sums, and the factors held beside the entries made the office's peak
+    cluster_gather = partial(cluster_transport, tree, h, leaves, cX, cY, cV) if len(cX) else None
+    _conserve(h, leaves, cluster_gather, gather, occluder, seed, scale, scene, m)
     rows = GatherRows.from_entries(leaves, gather, h.n)
     give_back_memory()
     system = LeafSystem.from_rows(h, rows, scene.rho)
-    if low_rank is not None:
-        system.add_clusters(*low_rank)
+    if len(cX):
+        system.add_clusters(*cluster_operator(tree, h, leaves, cX, cY, cV))
     return system, rows
 
 
-def _conserve(h, leaves, clusters, gather, occluder, seed, scale, scene, m):
+def _conserve(h, leaves, cluster_gather, gather, occluder, seed, scale, scene, m):
     """No leaf gathers more than the part of its hemisphere that sees sources (conserve.py).
     Needs a ray caster that knows its triangles' patches (``SceneData.make_occluder``).  ``m``:
     the quadrature of the leaves ``gather.near`` marks; the others gather at their centre."""
@@ -581,7 +585,7 @@ def _conserve(h, leaves, clusters, gather, occluder, seed, scale, scene, m):
                                       backs, at_centre)
     counted = scene.occluder.copy()
     counted[backs[backs >= 0]] = True
-    conserve_rows(leaves, clusters, gather, front, back, COVERAGE_RAYS, counted, h.patch)
+    conserve_rows(leaves, cluster_gather, gather, front, back, COVERAGE_RAYS, counted, h.patch)
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):
