@@ -56,39 +56,29 @@ def split_sources(h, gather, m: int, near: float, levels: int):
                                for a in range(0, len(gather.leaf), _PICK_BLOCK)])
         if len(pick) == 0:
             break
-        leaf, child = gather.leaf[pick], h.first_child[gather.source[pick]]
-        F_pick, FV_pick = gather.F[pick], gather.FV[pick]
-        keep = np.ones(len(gather.leaf), bool)
-        keep[pick] = False
-        n_keep = len(keep) - len(pick)
-
-        def grown(field, children=None):
-            """``field``'s kept entries moved to its front in blocks (np.compress would make
-            an index array), then room for 4 children a pick (``children`` or filled below):
-            in place (memory.resized), so no field is ever held twice."""
-            at = 0
-            for a in range(0, len(field), _PICK_BLOCK):
-                kept = field[a:a + _PICK_BLOCK][keep[a:a + _PICK_BLOCK]]
-                field[at:at + len(kept)] = kept
-                at += len(kept)
-            out = resized(field, n_keep + 4 * len(pick))
-            if children is not None:
-                out[n_keep:] = children
-            return out
-        gather.leaf = grown(gather.leaf, np.repeat(leaf, 4))
-        gather.source = grown(gather.source, (child[:, None] + np.arange(4)).ravel())
-        gather.F = grown(gather.F)
-        gather.FV = grown(gather.FV)
-        # a child's F V / F is its parent's: so is whether its visibility was estimated
-        gather.estimated = grown(gather.estimated, np.repeat(gather.estimated[pick], 4))
+        # The first child takes its parent's place and the other three are appended, each
+        # field grown in place (memory.resized): the picks' own values are never copied out
+        # whole, nor the kept entries moved (the picks, a keep mask and the moves made the
+        # office's peak at medium).
+        n_old = len(gather.leaf)
+        for key in ("leaf", "source", "F", "FV", "estimated"):
+            setattr(gather, key, resized(getattr(gather, key), n_old + 3 * len(pick)))
 
         def fill(c):
-            """The children's entries of the picks ``c`` (a slice), written in place: the
-            shares (32 B a pick) are never all held at once."""
-            share = _child_shares(h, leaf[c], child[c], on_points, m, radius)   # (n, 4)
-            at = slice(n_keep + 4 * c.start, n_keep + 4 * (c.start + len(share)))
-            gather.F[at] = (F_pick[c][:, None] * share).ravel()
-            gather.FV[at] = (FV_pick[c][:, None] * share).ravel()
+            """The children's entries of the picks ``c`` (a slice)."""
+            at, leaf = pick[c], gather.leaf[pick[c]]
+            child = h.first_child[gather.source[at]]
+            F, FV = gather.F[at], gather.FV[at]
+            share = _child_shares(h, leaf, child, on_points, m, radius)   # (n, 4)
+            gather.source[at] = child
+            gather.F[at], gather.FV[at] = F * share[:, 0], FV * share[:, 0]
+            rest = slice(n_old + 3 * c.start, n_old + 3 * (c.start + len(at)))
+            gather.leaf[rest] = np.repeat(leaf, 3)
+            gather.source[rest] = (child[:, None] + np.arange(1, 4)).ravel()
+            gather.F[rest] = (F[:, None] * share[:, 1:]).ravel()
+            gather.FV[rest] = (FV[:, None] * share[:, 1:]).ravel()
+            # a child's F V / F is its parent's: so is whether its visibility was estimated
+            gather.estimated[rest] = np.repeat(gather.estimated[at], 3)
         chunks = [slice(i, i + _CHUNK) for i in range(0, len(pick), _CHUNK)]
         if len(chunks) > 1 and _THREADS > 1:
             with ThreadPoolExecutor(_THREADS) as pool:
