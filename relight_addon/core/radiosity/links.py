@@ -24,7 +24,7 @@ from ..geometry.sampling import (R2, area_uniform_uv, jacobian_coefficients, qua
                                  stratified_unit_square)
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
-from .memory import give_back_memory, resized
+from .memory import give_back_memory, growable, resized
 
 VISIBLE, PARTIAL, INVISIBLE = 0, 1, 2
 
@@ -331,9 +331,10 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     # entries of partly visible links (their count unknown ahead) are appended after them.
     pair_start = np.concatenate([[0], np.cumsum(count[r])])
     n_pair_entries = int(pair_start[-1]) if with_leaves else 0
-    gather = LeafGather(np.empty(n_pair_entries, np.int32), np.empty(n_pair_entries, np.int32),
-                        np.empty(n_pair_entries, np.float32), np.empty(n_pair_entries), leaf_near,
-                        np.empty(n_pair_entries, bool))
+    # (growable: the rays' entries and the source split grow these fields in place)
+    gather = LeafGather(growable(n_pair_entries, np.int32), growable(n_pair_entries, np.int32),
+                        growable(n_pair_entries, np.float32), growable(n_pair_entries, float),
+                        leaf_near, growable(n_pair_entries, bool))
 
     def process(links, chunk_rng):
         """One chunk of links; writes its rows of F, Fv, seen_* and its pairs' gather entries,

@@ -44,8 +44,10 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
 from __future__ import annotations
 
 import ctypes
+import importlib
 import math
 import sys
+import threading
 from functools import lru_cache
 
 import numpy as np
@@ -171,15 +173,46 @@ def resized(array, n):
     """``array`` (1-D) grown or shrunk to ``n`` items, in place when numpy owns its buffer:
     realloc moves a large buffer's pages (mremap) instead of copying them, so a 400 MB array
     grown by its tail is not held twice, as np.concatenate would hold it, and a shrunk one
-    gives its tail back.  No view of ``array`` may be alive (it would point at freed memory).
-    New items are uninitialised."""
+    gives its tail back.  Only a buffer made by ``growable`` grows without a copy.  No view of
+    ``array`` may be alive (it would point at freed memory).  New items are uninitialised."""
     if array.flags.owndata and array.base is None and array.flags.c_contiguous and array.ndim == 1:
         try:
             array.resize(n, refcheck=False)
             return array
         except (ValueError, MemoryError):
             pass
-    out = np.empty(n, array.dtype)
+    out = growable(n, array.dtype)
     k = min(n, len(array))
     out[:k] = array[:k]
     return out
+
+
+_HUGEPAGE_LOCK = threading.Lock()
+
+
+def growable(n, dtype):
+    """np.empty(n, dtype) whose buffer ``resized`` grows in place.  numpy asks the kernel for
+    huge pages on arrays of 4 MB and more (madvise), and glibc's realloc then copies such a
+    buffer instead of remapping it: a 400 MB array grown by 20 % peaked at 800 MB (measured,
+    numpy 1.26, glibc 2.36), which made the form factors' join the office's peak at medium.
+    Allocated with that advice off (numpy's private switch; where it is missing, a plain
+    np.empty)."""
+    switch = _hugepage_switch()
+    if switch is None:
+        return np.empty(n, dtype)
+    with _HUGEPAGE_LOCK:
+        was = switch(False)
+        try:
+            return np.empty(n, dtype)
+        finally:
+            switch(was)
+
+
+@lru_cache(maxsize=1)
+def _hugepage_switch():
+    for module in ("numpy._core.multiarray", "numpy.core.multiarray"):
+        try:
+            return getattr(importlib.import_module(module), "_set_madvise_hugepage")
+        except (ImportError, AttributeError):
+            continue
+    return None
