@@ -88,26 +88,33 @@ def hemisphere_coverage(h, leaves, occluder, scene, rays, rng, scale, backs, at_
     n = h.normal[leaves]
     eps = ray_offset(scale)
     chunk = max(1, (1 << 20) // rays)
+    # the rays are traced a quarter of a chunk at a time: a chunk's ~300 B of temporaries a
+    # ray made the peak of the office at medium (the random numbers stay drawn per chunk)
+    part = max(1, chunk // 4)
     for a in range(0, L, chunk):
         b = min(a + chunk, L)
-        u, v, x1, x2 = rng.random((4, b - a, rays, 1))
-        if at_centre is not None:
-            u = np.where(at_centre[a:b, None, None], 0.5, u)
-            v = np.where(at_centre[a:b, None, None], 0.5, v)
-        cc = c[a:b, None]
-        P = (cc[..., 0, :] + u * (cc[..., 1, :] - cc[..., 0, :]) + v * (cc[..., 3, :] - cc[..., 0, :])
-             + u * v * (cc[..., 0, :] - cc[..., 1, :] + cc[..., 2, :] - cc[..., 3, :]))
-        D = cosine_directions(n[a:b, None], x1, x2)
-        O = P + eps * n[a:b, None]
-        t, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
-        hit = prim >= 0
-        p = patch_of[np.maximum(prim, 0)]
-        facing = np.einsum("ij,ij->i", normal[p], D.reshape(-1, 3)) < 0
-        faces = hit & np.where(facing, source[p], backed[p])
-        # a surface touching the leaf (a box standing on it) is no source of its row either
-        faces &= t >= CONTACT * scale
-        front[a:b] = faces.reshape(b - a, rays).mean(axis=1)
-        other[a:b] = (hit & ~faces).reshape(b - a, rays).mean(axis=1)
+        draws = rng.random((4, b - a, rays, 1))
+        for a2 in range(a, b, part):
+            b2 = min(a2 + part, b)
+            u, v, x1, x2 = draws[:, a2 - a:b2 - a]
+            if at_centre is not None:
+                u = np.where(at_centre[a2:b2, None, None], 0.5, u)
+                v = np.where(at_centre[a2:b2, None, None], 0.5, v)
+            cc = c[a2:b2, None]
+            P = (cc[..., 0, :] + u * (cc[..., 1, :] - cc[..., 0, :])
+                 + v * (cc[..., 3, :] - cc[..., 0, :])
+                 + u * v * (cc[..., 0, :] - cc[..., 1, :] + cc[..., 2, :] - cc[..., 3, :]))
+            D = cosine_directions(n[a2:b2, None], x1, x2)
+            O = P + eps * n[a2:b2, None]
+            t, prim = occluder.first_hit(O.reshape(-1, 3), D.reshape(-1, 3))
+            hit = prim >= 0
+            p = patch_of[np.maximum(prim, 0)]
+            facing = np.einsum("ij,ij->i", normal[p], D.reshape(-1, 3)) < 0
+            faces = hit & np.where(facing, source[p], backed[p])
+            # a surface touching the leaf (a box standing on it) is no source of its row either
+            faces &= t >= CONTACT * scale
+            front[a2:b2] = faces.reshape(b2 - a2, rays).mean(axis=1)
+            other[a2:b2] = (hit & ~faces).reshape(b2 - a2, rays).mean(axis=1)
     return front, other
 
 
