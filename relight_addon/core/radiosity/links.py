@@ -379,7 +379,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             free_rays = []
             # in batches of whole points' rays (bit for bit the same sums): a chunk's rays and
             # their ~250 B of temporaries each, in two threads, were the office's peak at medium
-            bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH)))
+            bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH),
+                                                 side="right"))
             for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(P)]):
                 ray_a = ray_end[pt_a - 1] if pt_a > 0 else 0
                 ray = np.arange(ray_a, ray_end[pt_b - 1])
@@ -409,7 +410,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 link_ray = link_pt[ray_pt]
                 n_free += np.bincount(link_ray, free, len(links))
                 n_blocked += np.bincount(link_ray, blocked, len(links))
-                free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
+                if with_leaves:
+                    free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
             free_frac = np.where(tried > 0, free_w / np.where(tried > 0, tried, 1.0), 1.0)
             seen_free[links] |= n_free > 0
             seen_blocked[links] |= n_blocked > 0

@@ -174,7 +174,8 @@ def resized(array, n):
     realloc moves a large buffer's pages (mremap) instead of copying them, so a 400 MB array
     grown by its tail is not held twice, as np.concatenate would hold it, and a shrunk one
     gives its tail back.  Only a buffer made by ``growable`` grows without a copy.  No view of
-    ``array`` may be alive (it would point at freed memory).  New items are uninitialised."""
+    ``array`` may be alive (it would point at freed memory).  New items are zeros or
+    uninitialised: the caller writes them."""
     if array.flags.owndata and array.base is None and array.flags.c_contiguous and array.ndim == 1:
         try:
             array.resize(n, refcheck=False)
@@ -196,7 +197,8 @@ def growable(n, dtype):
     buffer instead of remapping it: a 400 MB array grown by 20 % peaked at 800 MB (measured,
     numpy 1.26, glibc 2.36), which made the form factors' join the office's peak at medium.
     Allocated with that advice off (numpy's private switch; where it is missing, a plain
-    np.empty)."""
+    np.empty).  The switch is the process's: call it outside worker threads (another thread's
+    large arrays made meanwhile would go without the advice, slower only)."""
     switch = _hugepage_switch()
     if switch is None:
         return np.empty(n, dtype)
