@@ -58,7 +58,7 @@ BASE_BYTES = 60 * 2**20
 # the solve: fixed, per leaf (bound) and per patch bytes of each preset, and at most so many
 # bytes a leaf (bound) where that is less: small scenes (module docstring)
 SOLVE_BYTES = {"draft": (298 * 2**20, 0, 73 * 2**10, 360 * 2**10),
-               "medium": (182 * 2**20, 51 * 2**10, 87 * 2**10, 0),
+               "medium": (262 * 2**20, 51 * 2**10, 87 * 2**10, 0),
                "high": (336 * 2**20, 37 * 2**10, 253 * 2**10, 0),
                "ultra": (568 * 2**20, 36 * 2**10, 0, 0)}
 TEXEL_BYTES = 200
