@@ -369,6 +369,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
             ray_count = per_pt[link_pt]
             ray_end = np.cumsum(ray_count)
+            ray_start = ray_end - ray_count
+            recv_of_pt = lr[link_pt]
             # The rays of one point follow an R2 low-discrepancy sequence with a random shift
             # (Cranley-Patterson), so few rays still cover the source evenly.
             shift = chunk_rng.random((len(P), 2))
@@ -382,18 +384,17 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH),
                                                  side="right"))
             for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(P)]):
-                ray_a = ray_end[pt_a - 1] if pt_a > 0 else 0
-                ray = np.arange(ray_a, ray_end[pt_b - 1])
+                ray = np.arange(ray_start[pt_a], ray_end[pt_b - 1])
                 ray_pt = pt_a + np.searchsorted(ray_end[pt_a:pt_b], ray, side="right")
                 ray_src = src[ray_pt]
-                j = ray - (ray_end - ray_count)[ray_pt]
+                j = ray - ray_start[ray_pt]
                 xi_u = np.mod(j * R2[0] + shift[ray_pt, 0], 1.0)[:, None]
                 xi_v = np.mod(j * R2[1] + shift[ray_pt, 1], 1.0)[:, None]
                 u, v = area_uniform_uv(None, xi_u, xi_v, tuple(c[ray_src] for c in jac))
                 uu, vv = u[:, :1], v[:, :1]
                 Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
                      + (uu * vv) * twist[ray_src])
-                recv_el = lr[link_pt][ray_pt]
+                recv_el = recv_of_pt[ray_pt]
                 Pr = P[ray_pt]
                 kernel = point_kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
                 counts = kernel > 0

@@ -67,7 +67,8 @@ def split_sources(h, gather, m: int, near: float, levels: int):
 
         def fill(c):
             """The children's entries of the picks ``c`` (a slice)."""
-            at, leaf = pick[c], gather.leaf[pick[c]]
+            at = pick[c]
+            leaf = gather.leaf[at]
             child = h.first_child[gather.source[at]]
             F, FV = gather.F[at], gather.FV[at]
             share = _child_shares(h, leaf, child, on_points, m, radius)   # (n, 4)
