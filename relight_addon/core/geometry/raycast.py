@@ -117,7 +117,10 @@ class Occluder:
         with np.errstate(invalid="ignore", over="ignore"):
             d = e - o
             length2 = np.einsum("ij,ij->i", d, d)
-            valid = np.isfinite(o).all(1) & np.isfinite(e).all(1) & np.isfinite(length2) & (length2 > 0)
+            # a finite length needs finite ends (inf - inf is nan, inf - x is inf)
+            valid = np.isfinite(length2) & (length2 > 0)
+        if valid.all():                 # the usual case: no copies of 48 B a segment
+            return self._occluded(o, d, eps)
         idx = np.flatnonzero(valid)
         if len(idx):
             out[idx] = self._occluded(o[idx], d[idx], eps)

@@ -346,10 +346,13 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     if ff_m > m:
         ff_pts, ff_w = quadrature(h.corners[leaves], ff_m)
     jac = jacobian_coefficients(h.view("corners"))     # per element, for area-uniform sampling
-    # Bilinear map in power form, P = a + u (b - a) + v (d - a) + u v (a - b + c - d).
+    # Bilinear map in power form, P = a + u (b - a) + v (d - a) + u v (a - b + c - d), its four
+    # vectors side by side (a ray's source reads them in one gather)
     cs = h.view("corners")
-    corner_a, edge_u, edge_v = cs[:, 0], cs[:, 1] - cs[:, 0], cs[:, 3] - cs[:, 0]
-    twist = cs[:, 0] - cs[:, 1] + cs[:, 2] - cs[:, 3]
+    bilinear = np.stack([cs[:, 0], cs[:, 1] - cs[:, 0], cs[:, 3] - cs[:, 0],
+                         cs[:, 0] - cs[:, 1] + cs[:, 2] - cs[:, 3]], axis=1)
+    jac = np.stack(jac, axis=1)
+    eps = ray_offset(scale)
     radius = h.radius()
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
@@ -423,21 +426,23 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH),
                                                  side="right"))
             for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(P)]):
-                ray = np.arange(ray_start[pt_a], ray_end[pt_b - 1])
-                ray_pt = pt_a + np.searchsorted(ray_end[pt_a:pt_b], ray, side="right")
+                ray_pt = np.repeat(np.arange(pt_a, pt_b), ray_count[pt_a:pt_b])
                 ray_src = src[ray_pt]
-                j = ray - ray_start[ray_pt]
+                j = np.arange(ray_start[pt_a], ray_end[pt_b - 1]) - ray_start[ray_pt]
                 xi_u = np.mod(j * R2[0] + shift[ray_pt, 0], 1.0)[:, None]
                 xi_v = np.mod(j * R2[1] + shift[ray_pt, 1], 1.0)[:, None]
-                u, v = area_uniform_uv(None, xi_u, xi_v, tuple(c[ray_src] for c in jac))
+                u, v = area_uniform_uv(None, xi_u, xi_v, tuple(jac[ray_src].T))
                 uu, vv = u[:, :1], v[:, :1]
-                Q = (corner_a[ray_src] + uu * edge_u[ray_src] + vv * edge_v[ray_src]
-                     + (uu * vv) * twist[ray_src])
-                recv_el = recv_of_pt[ray_pt]
+                b = bilinear[ray_src]
+                Q = b[:, 0] + uu * b[:, 1] + vv * b[:, 2] + (uu * vv) * b[:, 3]
+                b = None
+                n_recv = h.normal[recv_of_pt[ray_pt]]
+                n_src = h.normal[ray_src]
                 Pr = P[ray_pt]
-                kernel = point_kernel(h.normal[recv_el], h.normal[ray_src], Q - Pr)
+                kernel = point_kernel(n_recv, n_src, Q - Pr)
                 counts = kernel > 0
-                p0, q0 = _offset_segments(h, recv_el, ray_src, Pr, Q, scale)
+                # lifted off their surfaces (as _offset_segments) so as not to hit their own
+                p0, q0 = Pr + eps * n_recv, Q + eps * n_src
                 with timer("visibility"):
                     blocked = occluder.segments_occluded(p0, q0)
                 free = counts & ~blocked
