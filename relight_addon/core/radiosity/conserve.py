@@ -131,6 +131,10 @@ def conserve_rows(leaves, cluster_gather, gather, front, other, rays, occluder_p
     and kept.  ``element_patch``: the patch of each element."""
     L = len(leaves)
     occluder_patch = np.asarray(occluder_patch, bool)
+    # each entry's row by a lookup, not a search (51 M entries on the office at medium)
+    slot_of = np.full(max(int(np.max(leaves, initial=-1)), int(np.max(gather.leaf, initial=-1)))
+                      + 1, -1, np.int64)
+    slot_of[leaves] = np.arange(L)
 
     def entries(a):
         """The block of entries from ``a``: their leaf slots, whether they are counted, and
@@ -139,7 +143,7 @@ def conserve_rows(leaves, cluster_gather, gather, front, other, rays, occluder_p
         FV = gather.FV[a:a + CONSERVE_BLOCK]
         counted = occluder_patch[element_patch[gather.source[a:a + CONSERVE_BLOCK]]]
         estimated = counted & (FV > 0) & gather.estimated[a:a + CONSERVE_BLOCK]
-        return np.searchsorted(leaves, gather.leaf[a:a + CONSERVE_BLOCK]), counted, estimated
+        return slot_of[gather.leaf[a:a + CONSERVE_BLOCK]], counted, estimated
 
     blocks = range(0, len(gather.leaf), CONSERVE_BLOCK)
     fixed, estim = np.zeros(L), np.zeros(L)

@@ -88,19 +88,20 @@ class GatherRows:
             slot, src, f_in, fv_in = (np.concatenate([g[i] for g in got]) for i in range(4))
             del got
             shape = (int(hi - lo), n_elements)
-            # scipy sorts into rows by counting and sums duplicates in place; the same pattern
-            # sorts the same way for any data, so F's rows line up with F V's
-            fv = sp.coo_matrix((fv_in, (slot - lo, src)), shape=shape).tocsr()
-            f = sp.coo_matrix((f_in.astype(np.float32, copy=False), (slot - lo, src)),
-                              shape=shape).tocsr()
-            del slot, src, f_in, fv_in
-            if not (np.array_equal(f.indptr, fv.indptr) and np.array_equal(f.indices, fv.indices)):
-                raise AssertionError("the unoccluded rows did not sort like the occluded ones")
-            m = fv.nnz
-            source[at:at + m], FV[at:at + m], F[at:at + m] = fv.indices, fv.data, f.data
-            indptr[lo + 1:hi + 1] = at + fv.indptr[1:]
+            # scipy sorts into rows by counting and sums duplicates in place.  F V and F ride
+            # together as one complex number (sums are per part), so the rows are sorted once
+            # (sorting the columns within rows was half the time, done for each field apart)
+            both = np.empty(len(fv_in), np.complex128)
+            both.real, both.imag = fv_in, f_in
+            del f_in, fv_in
+            rows = sp.coo_matrix((both, (slot - lo, src)), shape=shape).tocsr()
+            del slot, src, both
+            m = rows.nnz
+            source[at:at + m], FV[at:at + m], F[at:at + m] = (rows.indices, rows.data.real,
+                                                              rows.data.imag)
+            indptr[lo + 1:hi + 1] = at + rows.indptr[1:]
             at += m
-            del fv, f
+            del rows
             # the pieces (~1 MB each) were freed into the heap, which keeps their pages
             give_back_memory()
         return cls(np.asarray(leaves), indptr, resized(source, at), resized(F, at),

@@ -95,10 +95,13 @@ def split_sources(h, gather, m: int, near: float, levels: int):
 
 def _to_split(h, gather, a, b, radius, near):
     """Offsets (from ``a``) of the entries a:b to split: a source with children, seen, near."""
-    src, leaf = gather.source[a:b], gather.leaf[a:b]
-    return np.flatnonzero((h.first_child[src] >= 0) & (gather.FV[a:b] > 0)
-                          & (radius[src] > near * np.linalg.norm(h.centroid[leaf]
-                                                                 - h.centroid[src], axis=1)))
+    src = gather.source[a:b]
+    # the distances only for the entries of seen sources with children (after the first level
+    # most sources are leaves)
+    cand = np.flatnonzero((h.first_child[src] >= 0) & (gather.FV[a:b] > 0))
+    src = src[cand]
+    d = h.centroid[gather.leaf[a:b][cand]] - h.centroid[src]
+    return cand[radius[src] > near * np.sqrt(np.einsum("ij,ij->i", d, d))]
 
 
 def _child_shares(h, leaf, first_child, on_points, m, radius):
