@@ -159,11 +159,10 @@ def cluster_visibility(tree: ClusterTree, h: Hierarchy, X, Y, occluder, rays: in
     jac = jacobian_coefficients(h.corners[:n_patch])
 
     def sample(nodes):
-        lo, hi = tree.lo[nodes], tree.hi[nodes]
-        t = cum[np.repeat(lo, rays)] + rng.random(len(nodes) * rays) * (
-            cum[np.repeat(hi, rays)] - cum[np.repeat(lo, rays)])
-        pos = np.clip(np.searchsorted(cum, t, side="right") - 1, np.repeat(lo, rays),
-                      np.repeat(hi, rays) - 1)
+        lo, hi = np.repeat(tree.lo[nodes], rays), np.repeat(tree.hi[nodes], rays)
+        start = cum[lo]
+        t = start + rng.random(len(nodes) * rays) * (cum[hi] - start)
+        pos = np.clip(np.searchsorted(cum, t, side="right") - 1, lo, hi - 1)
         patch = tree.order[pos]
         u, v = area_uniform_uv(None, rng.random((len(patch), 1)), rng.random((len(patch), 1)),
                                tuple(j[patch] for j in jac))
@@ -208,7 +207,9 @@ class _Factors:
         rank[tree.order] = np.arange(len(tree.order))
         leaf_rank = rank[h.patch[leaves]]
         self.by_rank = np.argsort(leaf_rank, kind="stable")
-        self.sorted_rank = leaf_rank[self.by_rank]
+        # the first leaf of each rank (and one past the last): a node's leaves by lookup
+        self.rank_start = np.searchsorted(leaf_rank[self.by_rank],
+                                          np.arange(len(tree.order) + 1))
         self.leaf_centroid, self.leaf_normal = h.centroid[leaves], h.normal[leaves]
         self.leaf_area = h.area[leaves]
         # Separable kernel: 1/|x - y|^2 ~ d^2 / (|x - c_Y|^2 |y - c_X|^2), exact when either
@@ -223,8 +224,8 @@ class _Factors:
         return self.Y, self.tree.centre[self.X], np.ones(self.k), self.leaf_area
 
     def pointers(self, nodes):
-        first = np.searchsorted(self.sorted_rank, self.tree.lo[nodes])
-        count = np.searchsorted(self.sorted_rank, self.tree.hi[nodes]) - first
+        first = self.rank_start[self.tree.lo[nodes]]
+        count = self.rank_start[self.tree.hi[nodes]] - first
         return first, np.concatenate([[0], np.cumsum(count)])
 
     def blocks(self, side, pointers=None):
@@ -235,8 +236,12 @@ class _Factors:
         first, indptr = pointers if pointers is not None else self.pointers(nodes)
         n = int(indptr[-1])
         for a in range(0, n, OPERATOR_BLOCK):
-            entry = np.arange(a, min(a + OPERATOR_BLOCK, n))
-            link = np.searchsorted(indptr, entry, side="right") - 1
+            b = min(a + OPERATOR_BLOCK, n)
+            entry = np.arange(a, b)
+            # each entry's link: the block's links repeated by their entries in it
+            lo, hi = np.searchsorted(indptr, [a, b - 1], side="right") - 1
+            in_block = (np.minimum(indptr[lo + 1:hi + 2], b) - np.maximum(indptr[lo:hi + 1], a))
+            link = np.repeat(np.arange(lo, hi + 1), in_block)
             leaf = self.by_rank[first[link] + (entry - indptr[link])]
             x, nl, c = self.leaf_centroid[leaf], self.leaf_normal[leaf], centre[link]
             dx, dy, dz = c[:, 0] - x[:, 0], c[:, 1] - x[:, 1], c[:, 2] - x[:, 2]
