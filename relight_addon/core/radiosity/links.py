@@ -131,12 +131,6 @@ def initial_pairs(h: Hierarchy, receives: np.ndarray, sends: np.ndarray, scale: 
     return np.concatenate(rs), np.concatenate(ss)
 
 
-def _offset_segments(h, r, s, p, q, scale):
-    """Lift ray end points off their surfaces so that they do not hit their own element."""
-    eps = ray_offset(scale)
-    return p + eps * h.normal[r], q + eps * h.normal[s]
-
-
 def _no_timer(name):
     return nullcontext()
 
@@ -156,14 +150,17 @@ def oracle_estimates(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float,
         starts = range(0, n, size)
         seeds = rng.integers(0, 2**63 - 1, size=len(starts))
         jobs = [(slice(i, i + size), np.random.default_rng(int(sd))) for i, sd in zip(starts, seeds)]
+        jac = jacobian_coefficients(h.view("corners"))      # per element, once for all chunks
         with ThreadPoolExecutor(_THREADS) as pool:
             parts = list(pool.map(lambda job: _oracle_chunk(
-                h, r[job[0]], s[job[0]], occluder, rays, job[1], scale, timer), jobs))
+                h, r[job[0]], s[job[0]], occluder, rays, job[1], scale, timer, jac), jobs))
         return tuple(np.concatenate(p) for p in zip(*parts))
     return _oracle_chunk(h, r, s, occluder, rays, rng, scale, timer)
 
 
-def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, timer=_no_timer):
+def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, timer=_no_timer,
+                  jac=None):
+    """oracle_estimates on one chunk; ``jac``: jacobian_coefficients of every element."""
     n = len(r)
     if n == 0:
         z = np.zeros(0)
@@ -180,15 +177,17 @@ def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, ti
         return F, spread, np.ones(n), np.zeros(n, bool), F_points
     ur, vr = stratified_unit_square(n, rays, rng)
     us, vs = stratified_unit_square(n, rays, rng)
-    ur, vr = area_uniform_uv(h.corners[r], ur, vr)
-    us, vs = area_uniform_uv(h.corners[s], us, vs)
-    p = bilinear_point(h.corners[r][:, None], ur, vr)
+    if jac is None:
+        jac = jacobian_coefficients(h.view("corners"))
+    ur, vr = area_uniform_uv(None, ur, vr, tuple(j[r] for j in jac))
+    us, vs = area_uniform_uv(None, us, vs, tuple(j[s] for j in jac))
+    p = bilinear_point(h.corners[r][:, None], ur, vr)             # (n, rays, 3)
     q = bilinear_point(h.corners[s][:, None], us, vs)
-    rr = np.repeat(r, rays)
-    ss = np.repeat(s, rays)
-    p, q = p.reshape(-1, 3), q.reshape(-1, 3)
-    counts = _mutually_in_front(h, rr, ss, p, q).reshape(n, rays)
-    p, q = _offset_segments(h, rr, ss, p, q, scale)
+    nr, ns = h.normal[r][:, None], h.normal[s][:, None]       # broadcast over the rays
+    counts = _mutually_in_front(q - p, nr, ns)
+    # lifted off their surfaces so that they do not hit their own element
+    eps = ray_offset(scale)
+    p, q = (p + eps * nr).reshape(-1, 3), (q + eps * ns).reshape(-1, 3)
     with timer("visibility"):
         blocked = occluder.segments_occluded(p, q).reshape(n, rays) & counts
     tried = counts.sum(axis=1)
@@ -198,16 +197,15 @@ def _oracle_chunk(h: Hierarchy, r, s, occluder, rays: int, rng, scale: float, ti
     return F, spread, free, partial, F_points
 
 
-def _mutually_in_front(h, r, s, p, q):
-    """Whether the sample pair (p on r, q on s) can exchange light at all.
+def _mutually_in_front(d, nr, ns):
+    """Whether sample pairs (p on r, q on s, d = q - p; normals nr, ns broadcast against d's
+    rows) can exchange light at all.
 
     F already clips each source to the part in front of the receiver point; a visibility ray to
     a source point behind that plane would only measure the clipping again (and hit the
     receiver's own object), so such samples are left out of the visible fraction."""
-    d = q - p
-    nr, ns = h.normal[r], h.normal[s]
-    return ((d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1] + d[:, 2] * nr[:, 2] > 0)
-            & (d[:, 0] * ns[:, 0] + d[:, 1] * ns[:, 1] + d[:, 2] * ns[:, 2] < 0))
+    return ((d[..., 0] * nr[..., 0] + d[..., 1] * nr[..., 1] + d[..., 2] * nr[..., 2] > 0)
+            & (d[..., 0] * ns[..., 0] + d[..., 1] * ns[..., 1] + d[..., 2] * ns[..., 2] < 0))
 
 
 def _segment_ranges(starts, counts):
@@ -446,7 +444,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 Pr = P[ray_pt]
                 kernel = point_kernel(n_recv, n_src, Q - Pr)
                 counts = kernel > 0
-                # lifted off their surfaces (as _offset_segments) so as not to hit their own
+                # lifted off their surfaces so as not to hit their own elements
                 p0, q0 = Pr + eps * n_recv, Q + eps * n_src
                 with timer("visibility"):
                     blocked = occluder.segments_occluded(p0, q0)
