@@ -437,8 +437,13 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 u, v = area_uniform_uv(None, xi_u, xi_v, tuple(jac[ray_src].T))
                 uu, vv = u[:, :1], v[:, :1]
                 b = bilinear[ray_src]
-                Q = b[:, 0] + uu * b[:, 1] + vv * b[:, 2] + (uu * vv) * b[:, 3]
-                b = None
+                Q = b[:, 1] * uu                # a + u eu + v ev + u v tw, in place
+                Q += b[:, 0]
+                term = b[:, 2] * vv
+                Q += term
+                np.multiply(b[:, 3], uu * vv, out=term)
+                Q += term
+                b = term = None
                 n_recv = h.normal[recv_of_pt[ray_pt]]
                 n_src = h.normal[ray_src]
                 Pr = P[ray_pt]
