@@ -132,8 +132,7 @@ def conserve_rows(leaves, cluster_gather, gather, front, other, rays, occluder_p
     L = len(leaves)
     occluder_patch = np.asarray(occluder_patch, bool)
     # each entry's row by a lookup, not a search (51 M entries on the office at medium)
-    slot_of = np.full(max(int(np.max(leaves, initial=-1)), int(np.max(gather.leaf, initial=-1)))
-                      + 1, -1, np.int64)
+    slot_of = np.full(len(element_patch), -1, np.int64)
     slot_of[leaves] = np.arange(L)
 
     def entries(a):

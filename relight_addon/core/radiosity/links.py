@@ -286,29 +286,27 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
     source each, gathering from a small far one through one link).  With
     ``ff_pts`` the near pairs' values are their mean over those finer points."""
     nn = len(near_pairs) * mm
-    pair_src = ls[link_of]
+    pair_src, pair_recv = ls[link_of], lr[link_of]
     close = _close(h, radius, leaf_ids[near_pairs], pair_src[near_pairs], _CENTRE_RATIO)
-    at_points, at_centre = np.flatnonzero(close), np.flatnonzero(~close)
-    point_of = (at_points[:, None] * mm + np.arange(mm)).ravel()
-    pairs = np.concatenate([near_pairs[at_points], near_pairs[at_centre], far_pairs])
-    where = np.concatenate([P[point_of], h.centroid[leaf_ids[near_pairs[at_centre]]], P[nn:]])
-    src = np.concatenate([np.repeat(pair_src[near_pairs[at_points]], mm),
-                          pair_src[pairs[len(at_points):]]])
-    recv = np.concatenate([np.repeat(lr[link_of[near_pairs[at_points]]], mm),
-                           lr[link_of[pairs[len(at_points):]]]])
+    on_points = near_pairs[close]                                # then one value a pair:
+    at_centre = np.concatenate([near_pairs[~close], far_pairs])  # near leaves', far leaves'
+    point_of = (np.flatnonzero(close)[:, None] * mm + np.arange(mm)).ravel()
+    where = np.concatenate([P[point_of], h.centroid[leaf_ids[at_centre]]])
+    src = np.concatenate([np.repeat(pair_src[on_points], mm), pair_src[at_centre]])
+    recv = np.concatenate([np.repeat(pair_recv[on_points], mm), pair_recv[at_centre]])
     value = point_to_polygon(where, h.normal[recv], h.corners[src], h.normal[src])
-    f = np.empty(len(P))
     n_points = len(point_of)
-    f_near = f[:nn].reshape(-1, mm)
     if n_points and ff_pts is not None:
+        at = slot[close]
         value[:n_points] = _finer_form_factors(
-            h, value[:n_points].reshape(-1, mm), q_w[slot[at_points]],
-            ff_pts[slot[at_points]], ff_w[slot[at_points]],
-            h.normal[lr][link_of[near_pairs[at_points]]],
-            pair_src[near_pairs[at_points]]).reshape(-1)
-    f_near[at_points] = value[:n_points].reshape(-1, mm)
-    f_near[at_centre] = value[n_points:n_points + len(at_centre), None]
-    f[nn:] = value[n_points + len(at_centre):]
+            h, value[:n_points].reshape(-1, mm), q_w[at], ff_pts[at], ff_w[at],
+            h.normal[pair_recv[on_points]], pair_src[on_points]).reshape(-1)
+    f = np.empty(len(P))
+    f_near = f[:nn].reshape(-1, mm)
+    f_near[close] = value[:n_points].reshape(-1, mm)
+    far_from = n_points + len(near_pairs) - len(on_points)      # the far leaves' values
+    f_near[~close] = value[n_points:far_from, None]
+    f[nn:] = value[far_from:]
     return f
 
 
