@@ -35,6 +35,8 @@ CHUNK = 1 << 16         # points located at once
 KERNEL_LEAVES = 16      # leaves around each texel that its indirect light is read from
 FACING = 0.5            # ... those whose normal is within 60 degrees of the texel's
 PLANAR = np.cos(np.radians(10.0))
+PLANE_ANGLE = np.cos(np.radians(5.0))
+PLANE_OFFSET = 10.0     # x the roughness: how far from a plane a proxy triangle may lie in it
 SMOOTH_FACES = 2.0      # shading normals averaged over this many face sizes
 WELD = 1e-7             # vertices closer than this x the scene's size are one vertex
 
@@ -176,15 +178,46 @@ def build_proxy(scene: SceneData, faces: int, back_of=None) -> Proxy:
     # Shading normals over about two faces around each (the scan's noise averaged out).
     edge = np.sqrt(2.0 * np.median(area[surf])) if len(surf) else 0.0
     normals, roughness = smooth_normals(scene, SMOOTH_FACES * edge) if edge > 0 else (normal, 0.0)
-    # Where the faces lie along their proxy triangle (a wall, a table top: within PLANAR of
-    # its mean normal), that mean normal, over many more faces than the neighbourhood's.
-    mean = np.zeros((p, 3))
-    np.add.at(mean, of_patch, area[:, None] * normal)
-    mean /= np.maximum(np.linalg.norm(mean, axis=1), 1e-300)[:, None]
-    planar = np.einsum("ij,ij->i", normals, mean[of_patch]) > PLANAR
-    normals = np.where(planar[:, None], mean[of_patch], normals)
+    # Where the faces lie along a plane (a wall, a table top: within PLANAR of it), the plane's
+    # normal, over many more faces than the neighbourhood's.
+    sums = np.zeros((p, 3))
+    np.add.at(sums, of_patch, area[:, None] * normal)
+    plane = plane_normals(sums, proxy.corners[:, :3].mean(axis=1),
+                          max(PLANE_OFFSET * roughness, WELD * scale))
+    planar = np.einsum("ij,ij->i", normals, plane[of_patch]) > PLANAR
+    normals = np.where(planar[:, None], plane[of_patch], normals)
     return Proxy(proxy, of_patch, deviation, len(tris_in), normals, roughness,
                  proxy_back_of, time.perf_counter() - t0)
+
+
+def plane_normals(sums, centres, tolerance):
+    """Unit normals (p, 3) of the planes the proxy triangles lie in.  ``sums``: each triangle's
+    area-weighted sum of its input faces' normals; triangles whose mean normals agree within
+    PLANE_ANGLE and whose ``centres`` lie within ``tolerance`` of one plane (seeded by the
+    largest triangles first) share that plane's normal, the mean over all their faces.  One
+    triangle's mean is not enough on a scan: 2 mm of noise tilts a 1.5 cm face by ~8 degrees,
+    and the ~17-70 faces of a proxy triangle leave its mean 1-2 degrees off, a step in the
+    direct light at every triangle's edge (4 % at 70 degrees' incidence) that the shadow-edge
+    fit read as indirect light: family room 0's scan on a 6,000-triangle proxy fitted rho^ 0.56
+    (the clean room 0.45) and relit with a lamp off at 1.10 CIEDE2000 (0.58 with the planes'
+    normals).  A triangle that no plane takes keeps its own mean."""
+    weight = np.linalg.norm(sums, axis=1)
+    unit = sums / np.maximum(weight, 1e-300)[:, None]
+    label = np.where(weight > 0, -1, -2)
+    for i in np.argsort(-weight, kind="stable"):
+        if label[i] != -1:
+            continue
+        free = np.flatnonzero(label == -1)
+        n = unit[i]
+        near = (unit[free] @ n > PLANE_ANGLE) & (np.abs((centres[free] - centres[i]) @ n) < tolerance)
+        label[free[near]] = i
+    out = unit.copy()
+    inside = np.flatnonzero(label >= 0)
+    total = np.zeros_like(sums)
+    np.add.at(total, label[inside], sums[inside])
+    total /= np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
+    out[inside] = total[label[inside]]
+    return out
 
 
 def _with_backs(proxy: SceneData, of_patch, area_front, back_of, surf):
