@@ -199,18 +199,19 @@ def test_a_scanned_room_relights_like_its_clean_model(scanned_family_rooms):
     for index in (20, 22):
         room, res, sc = scanned_family_rooms[index, True]
         clean_room, clean, clean_sc = scanned_family_rooms[index, False]
-        assert room.data.n_patches > 15_000 and res.stats["proxy_faces"] <= 1600
+        assert room.data.n_patches > 15_000 and res.stats["proxy_faces"] <= 3100
         assert clean.stats.get("proxy_faces") is None
         # the mesh is within its noise of the proxy, and the proxy's solve is what it costs
         assert res.stats["proxy_deviation"] < 2 * NOISE
         assert estimate_precompute_memory(room.data, "medium") < \
             0.5 * estimate_precompute_memory(room.data, "medium", proxy=False)
-        # against the Cycles truth, beside the clean model (measured: 0.54 / 0.77 against
-        # 0.58 / 0.86 on room 20; 0.85 / 0.97 against 0.65 / 0.91 on room 22)
+        # against the Cycles truth, beside the clean model (measured: 0.53 / 0.75 against
+        # 0.56 / 0.86 on room 20; 0.66 / 0.88 against 0.67 / 0.93 on room 22, which was
+        # 0.85 / 0.97 on a proxy of 1,500 triangles with their own mean normals)
         scan_all, scan_shadow = _lamp_off(sc)
         clean_all, clean_shadow = _lamp_off(clean_sc)
-        assert scan_all <= clean_all + 0.35 and scan_all <= 1.2, (index, scan_all, clean_all)
-        assert scan_shadow <= clean_shadow + 0.35, (index, scan_shadow, clean_shadow)
+        assert scan_all <= clean_all + 0.12 and scan_all <= 1.0, (index, scan_all, clean_all)
+        assert scan_shadow <= clean_shadow + 0.12, (index, scan_shadow, clean_shadow)
         assert sc["ratio_error"] < 0.05                     # the user's exact powers kept
         for label, row in sc["targets"].items():
             assert np.isfinite(row["relit"]["all"][0]), label

@@ -66,12 +66,13 @@ class Quality:
     # out beyond 2 sigma at 0.05 (room 7's lamps, 55 and 121 W, pinned 15 % off): draft 0.10
     exitance_bias: float = 0.05
     # meshes of more than PROXY_FACTOR x proxy_faces faces (scans) are solved on a decimated
-    # proxy of about proxy_faces triangles (radiosity.proxy).  On scans of family rooms (100k
-    # triangles, benchmarks/results/scan.md) the lamp-off error falls to the clean room's as the
-    # proxy grows to ~1500 at medium, then rises again where its triangles are more than the
-    # cluster links resolve (4000: room 16 0.60 -> 0.80, room 3 0.87 -> 2.15; high at 3000:
-    # room 0 0.58 -> 0.86), so the finer presets keep 1500 until cluster links improve
-    proxy_faces: int = 1500
+    # proxy of about proxy_faces triangles (radiosity.proxy).  On scans of family rooms 0, 3,
+    # 5, 16 (100k triangles, benchmarks/results/scan.md) at medium, lamp off, all / former
+    # shadows: 1,500 triangles 0.56-0.84 / 0.55-0.98, 3,000 0.50-0.78 / 0.50-0.81 (the clean
+    # rooms 0.57-0.74 / 0.50-0.78), for 1.1-1.8x the time.  (Finer proxies once did worse:
+    # their triangles' own mean normals and too few texels a triangle for the rho^ vote,
+    # radiosity.proxy.plane_normals and relight.exitance.VOTE_MIN_COVER)
+    proxy_faces: int = 3000
 
     def with_(self, **changes) -> "Quality":
         return replace(self, **changes)
@@ -83,17 +84,19 @@ PRESETS = {
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
-                      proxy_faces=1500, split_levels=3, split_near=0.15, contact_levels=2),
+                      split_levels=3, split_near=0.15, contact_levels=2),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
-                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=1500,
+                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=6000,
                     split_levels=3, split_near=0.15),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=1500,
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=6000,
                      split_levels=3, split_near=0.1),
 }
 
 
-PROXY_FACTOR = 4
+# a mesh of more than this x proxy_faces faces is solved on a proxy (a 6,000-face mesh at
+# medium, as when the proxy was 1,500 triangles and the factor 4)
+PROXY_FACTOR = 2
 
 
 def get_preset(preset) -> Quality:
