@@ -68,10 +68,13 @@ class Quality:
     # meshes of more than PROXY_FACTOR x proxy_faces faces (scans) are solved on a decimated
     # proxy of about proxy_faces triangles (radiosity.proxy).  On scans of family rooms 0, 3,
     # 5, 16 (100k triangles, benchmarks/results/scan.md) at medium, lamp off, all / former
-    # shadows: 1,500 triangles 0.56-0.84 / 0.55-0.98, 3,000 0.50-0.78 / 0.50-0.81 (the clean
-    # rooms 0.57-0.74 / 0.50-0.78), for 1.1-1.8x the time.  (Finer proxies once did worse:
-    # their triangles' own mean normals and too few texels a triangle for the rho^ vote,
-    # radiosity.proxy.plane_normals and relight.exitance.VOTE_MIN_COVER)
+    # shadows: 1,500 triangles 0.56-0.94 / 0.55-0.98 (room 0: 0.56 / 0.93), 3,000 0.50-0.78 /
+    # 0.50-0.81 (0.53 / 0.71), 6,000 0.55 / 0.72 on room 0 (the clean rooms 0.57-0.74 /
+    # 0.50-0.78), for 1.1-1.8x and 2.5x the time of 1,500.  At high 6,000 was worse than
+    # 3,000 on the mean (0.66 / 0.71 over the four rooms against medium's 0.60 / 0.71; room 5
+    # 0.72 / 0.55), so every preset above draft keeps 3,000.  (Finer proxies once did worse
+    # still: their triangles' own mean normals and too few texels a triangle for the rho^
+    # vote, radiosity.proxy.plane_normals and relight.exitance.VOTE_MIN_COVER)
     proxy_faces: int = 3000
 
     def with_(self, **changes) -> "Quality":
@@ -86,16 +89,16 @@ PRESETS = {
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
                       split_levels=3, split_near=0.15, contact_levels=2),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
-                    oracle_rays=8, separation=0.25, confirm_rays=4, proxy_faces=6000,
+                    oracle_rays=8, separation=0.25, confirm_rays=4,
                     split_levels=3, split_near=0.15),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
-                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4, proxy_faces=6000,
+                     rays=32, oracle_rays=8, separation=0.15, confirm_rays=4,
                      split_levels=3, split_near=0.1),
 }
 
 
-# a mesh of more than this x proxy_faces faces is solved on a proxy (a 6,000-face mesh at
-# medium, as when the proxy was 1,500 triangles and the factor 4)
+# a mesh of more than this x proxy_faces faces is solved on a proxy (more than 6,000 faces
+# above draft, as when the proxy was 1,500 triangles and the factor 4)
 PROXY_FACTOR = 2
 
 

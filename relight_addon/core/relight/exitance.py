@@ -469,6 +469,8 @@ def _space_cells(scene, tm, rows, per_patch):
     texels each in the whole map): the same group, facing along the same axis, in the same
     cube of VOTE_CELL_TEXELS texels a side (each patch's texel spacing, the median over them).
     Pieces whose size does not follow the tessellation."""
+    if len(rows) == 0:
+        return np.zeros(0, np.int64)
     area, normal = scene.area_normal()
     patch = tm.patch[rows]
     spacing = np.sqrt(area[patch] / np.maximum(per_patch[patch], 1))
