@@ -317,14 +317,14 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     sigma_vote = np.inf
     if indirect:          # the surfaces' vote at the current ratios (VOTE_*), not the pooled fit
         D_sum, I_sum, stm = D.sum(axis=0), I.sum(axis=0), light.solution_texels
-        g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, stm, a, b, np.bincount(tm.patch),
-                                fallback=g)
+        per_patch = np.bincount(tm.patch)
+        g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, stm, a, b, per_patch, fallback=g)
         if not np.isfinite(sigma_vote):
             # pieces too small to vote (a fine proxy's triangles): cells of space vote.  Whole
             # surfaces (below) on family room 5's scan on 6,000 triangles fitted rho^ 0.28
             # (clean room 0.43): the wall round a cabinet's contact shadows decided
             cells = SimpleNamespace(patch=np.zeros(len(stm.patch), np.int64), u=stm.u, v=stm.v)
-            cells.patch[a] = _space_cells(sol.scene, stm, a, np.bincount(tm.patch))
+            cells.patch[a] = _space_cells(sol.scene, stm, a, per_patch)
             g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, cells, a, b,
                                     np.ones(int(cells.patch.max(initial=0)) + 1), fallback=g)
         if not np.isfinite(sigma_vote):
