@@ -15,6 +15,8 @@ import bpy
 from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
+from ..relight_addon.core.radiosity.presets import PROXY_FACTOR
+
 STATUS = "relight_status"
 ROLE_PROPERTY = "relight_role"
 
@@ -141,10 +143,11 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
     proxy_faces: IntProperty(name="Proxy Faces", default=0, min=0, soft_max=20000,
-                             description="A mesh of more than 4x this many faces (a scan) is "
-                                         "solved on a decimated proxy of about this many "
-                                         "triangles; the direct light and the textures stay "
-                                         "on the full mesh. 0: the quality preset's")
+                             description=f"A mesh of more than {PROXY_FACTOR}x this many "
+                                         "faces (a scan) is solved on a decimated proxy of "
+                                         "about this many triangles; the direct light and the "
+                                         "textures stay on the full mesh. 0: the quality "
+                                         "preset's")
     settle: BoolProperty(name="Settle Moving Shadows", default=True,
                          description="On Update, ray-trace the moving objects' real shadows "
                                      "where they stand; the materials use them until an "
