@@ -31,7 +31,7 @@ from ..scene import SceneData, quad_area_normal
 
 CANDIDATES = 12         # nearest sample points whose triangles are tested first
 SAMPLES_PER_FACE = 8    # proxy sample points per average proxy triangle
-CHUNK = 1 << 16         # points located at once
+CHUNK = 1 << 14         # points located at once (12-48 candidate triangles each)
 KERNEL_LEAVES = 16      # leaves around each texel that its indirect light is read from
 FACING = 0.5            # ... those whose normal is within 60 degrees of the texel's
 PLANAR = np.cos(np.radians(10.0))
