@@ -107,7 +107,8 @@ def memory_error(context, data, preset):
     """Bad input check: an error message when the estimated peak memory of the solve exceeds
     the add-on preference ``memory_limit_gb`` (checked before solving; nothing is changed)."""
     from .. import preferences
-    from ..relight_addon.core.radiosity.memory import estimate_precompute_memory
+    from ..relight_addon.core.radiosity.memory import (estimate_precompute_memory,
+                                                       estimate_texel_memory, proxy_phases)
     from ..relight_addon.core.radiosity.presets import PROXY_FACTOR, get_preset
     faces = proxy_faces_of(context.scene)
     estimate = estimate_precompute_memory(data, preset, proxy_faces=faces)
@@ -116,8 +117,18 @@ def memory_error(context, data, preset):
         return None
     proxy = faces or get_preset(preset).proxy_faces
     if data.n_patches > PROXY_FACTOR * proxy:
-        hint = (f"lower Proxy Faces (now {proxy}: the {data.n_patches} faces are solved on a "
-                f"decimated proxy of that many), use smaller photos")
+        # name what makes the peak: the mesh itself, the proxy's solve or the photos
+        phases = proxy_phases(get_preset(preset), data.n_patches, proxy,
+                              estimate_texel_memory(data))
+        largest = max(phases, key=phases.get)
+        if largest == "mesh":
+            hint = (f"decimate the mesh first (its {data.n_patches} faces alone need that much: "
+                    f"Blender's Decimate modifier)")
+        elif largest == "texels":
+            hint = "use smaller photos"
+        else:
+            hint = (f"lower Proxy Faces (now {proxy}: the {data.n_patches} faces are solved on "
+                    f"a decimated proxy of that many), use smaller photos")
     else:
         hint = "choose a lower preset, use fewer faces or smaller photos"
     return (f"Relight precompute ({preset}) needs about {estimate / 2**30:.2f} GB, more than the "

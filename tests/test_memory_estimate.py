@@ -53,6 +53,43 @@ def test_estimate_bounds_a_measured_solve_closely(preset, n):
     assert 1.0 <= ratio <= 1.75, (preset, n, rec, ratio)
 
 
+MEASURE_SCAN = """
+import json, sys
+
+def high_water_kb():
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("VmHWM:"))
+
+sys.path[:0] = [{root!r}]
+from relight_addon.core.radiosity.memory import BASE_BYTES, estimate_precompute_memory
+from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
+from scenes import family_eval as fe
+room = fe.photographed_room(20, "exact", scan=dict(triangles=20_000, noise=0.002, seed=0))
+before = high_water_kb()
+res = shadow_free(room.data, ShadowFreeOptions(preset="medium"))
+peak = high_water_kb()
+print(json.dumps({{"measured": (peak - before) * 1024 + BASE_BYTES,
+                  "estimate": estimate_precompute_memory(room.data, "medium"),
+                  "proxy_faces": res.stats["proxy_faces"]}}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
+def test_estimate_of_a_scan_solved_on_a_proxy_is_within_a_quarter():
+    """Issue 10's target: a scanned room's precompute (20k triangles solved on a proxy of
+    3,000) within 25 % of its estimate, in a fresh process.  Measured 574 and 666 MB in two
+    runs of the same case (the peak varies by +-14 % from run to run), estimated 635 MB; the
+    estimate before it counted its phases as one after another was 1.6x."""
+    code = MEASURE_SCAN.format(root=ROOT)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rec = json.loads(out.stdout.strip().splitlines()[-1])
+    assert rec["proxy_faces"] > 0
+    ratio = rec["estimate"] / rec["measured"]
+    assert 0.75 <= ratio <= 1.25, (rec, ratio)
+
+
 def test_memory_estimate_grows_with_preset_and_patches():
     small = cornell_box(subdivide=1)
     est = [estimate_precompute_memory(small, p) for p in ("draft", "medium", "high", "ultra")]
@@ -71,8 +108,12 @@ def test_memory_estimate_grows_with_preset_and_patches():
     with_proxy = estimate_precompute_memory(scan, "medium") / 2**30
     without = estimate_precompute_memory(scan, "medium", proxy=False) / 2**30
     assert with_proxy < 2.0 < 8.0 < without, (with_proxy, without)
+    # Its phases follow one another: the proxy's solve is the peak up to a few million faces
+    # (the same for 100k), then the mesh's own phase (turning and decimating the faces).
     half = estimate_precompute_memory(scan[:100_000] * 2, "medium") / 2**30
-    assert half < with_proxy < half + 0.5                 # the faces' own cost still counts
+    assert half <= with_proxy < half + 0.1
+    huge = estimate_precompute_memory(np.full(5_000_000, 100.0 / 5_000_000), "medium") / 2**30
+    assert huge > with_proxy + 1.0
     assert estimate_precompute_memory(np.zeros(3), "draft") >= BASE_BYTES
 
 

@@ -356,3 +356,36 @@ def test_a_clean_model_sent_through_the_proxy_path_relights_as_itself(monkeypatc
     via = fe.score(room, res)
     (a0, s0), (a1, s1) = _lamp_off(direct), _lamp_off(via)
     assert abs(a1 - a0) < 0.05 and abs(s1 - s0) < 0.08, (a0, s0, a1, s1)
+
+
+def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
+    """Over the memory limit (8 GB by default), the error names the phase that needs it: a
+    mesh of 20 M faces cannot be helped by a coarser proxy (its own faces need ~10 GB), a
+    proxy of 150k triangles can."""
+    pytest.importorskip("bpy")
+    import importlib
+    from types import SimpleNamespace
+
+    from scenes.addon import PACKAGE, register_repo_addon
+    register_repo_addon()
+    precompute = importlib.import_module(PACKAGE + ".operators.precompute")
+
+    class Mesh:                                   # what memory_error reads of a SceneData
+        images = None
+
+        def __init__(self, faces):
+            self.n_patches = faces
+
+        def area_normal(self):
+            return np.full(self.n_patches, 100.0 / self.n_patches), None
+
+    def error(faces, proxy_faces):
+        context = SimpleNamespace(preferences=SimpleNamespace(addons={}),
+                                  scene=SimpleNamespace(relight=SimpleNamespace(
+                                      proxy_faces=proxy_faces)))
+        return precompute.memory_error(context, Mesh(faces), "medium")
+
+    assert error(2_000_000, 0) is None                  # a 2 M-face scan fits in 8 GB
+    assert "decimate the mesh" in error(20_000_000, 0)
+    lower = error(2_000_000, 150_000)
+    assert "lower Proxy Faces" in lower and "decimate the mesh" not in lower
