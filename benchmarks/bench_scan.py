@@ -9,10 +9,12 @@ its peak RSS is its own.  Reported per case: wall time of the precompute, peak R
 after reading (Blender, the scene and its images), the memory estimate the operator checks
 before it starts, and the lamp-off error against the Cycles truth (mean CIEDE2000 over the
 lamp-off / only-one-lamp targets, overall and in the switched-off lamps' former shadows, as
-benchmarks/bench_family.py), beside the same room read as its clean quads.
+benchmarks/bench_family.py), beside the same room read as its clean quads, and (medium) the
+scans read as one group, as a real scan (one object, one material) is.
 
-    python benchmarks/bench_scan.py                       # everything (~25 min)
+    python benchmarks/bench_scan.py                       # everything (~28 min)
     python benchmarks/bench_scan.py --quick               # the memory / time scaling only
+    python benchmarks/bench_scan.py --one-group-only      # the one-group scans (~3 min)
 
 Writes benchmarks/results/scan.md, scan_raw.json and scan.png.
 """
@@ -36,7 +38,7 @@ SIZES = (25_000, 50_000, 100_000, 200_000)
 PROXY_CURVE = (500, 1000, 1500, 3000, 6000)
 
 
-def child(room, faces, preset, proxy_faces):
+def child(room, faces, preset, proxy_faces, one_group=False):
     import resource
 
     import numpy as np
@@ -51,6 +53,12 @@ def child(room, faces, preset, proxy_faces):
     r = fe.photographed_room(room, "exact",
                              scan=dict(triangles=faces, noise=NOISE) if faces else None)
     read_s = time.perf_counter() - t0
+    if one_group:
+        # a real scan is one object with one material: every surface face in one group
+        surface = r.data.lamp < 0
+        group = r.data.group.copy()
+        group[surface] = group[surface].min()
+        r.data.group = group
     rss_read = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     estimate = estimate_precompute_memory(r.data, preset) / 2**20
     without_proxy = estimate_precompute_memory(r.data, preset, proxy=False) / 2**20
@@ -71,7 +79,7 @@ def child(room, faces, preset, proxy_faces):
     proxy = res.solution.context.get("proxy")
     print(json.dumps({
         "room": room, "faces": int(r.data.n_patches), "preset": preset,
-        "proxy_setting": proxy_faces, "read_s": read_s, "seconds": seconds,
+        "proxy_setting": proxy_faces, "one_group": bool(one_group), "read_s": read_s, "seconds": seconds,
         "rss_read_mb": rss_read, "peak_mb": peak, "estimate_mb": estimate,
         "estimate_without_proxy_mb": without_proxy,
         "proxy_faces": int(st.get("proxy_faces", 0)), "leaves": int(st["leaves"]),
@@ -84,8 +92,9 @@ def child(room, faces, preset, proxy_faces):
         "applied": [bool(x) for x in res.lamps.applied]}))
 
 
-def run(room, faces, preset, proxy_faces=0, timeout=1800):
-    cmd = [sys.executable, __file__, "--child", str(room), str(faces), preset, str(proxy_faces)]
+def run(room, faces, preset, proxy_faces=0, one_group=False, timeout=1800):
+    cmd = [sys.executable, __file__, "--child", str(room), str(faces), preset, str(proxy_faces),
+           str(int(one_group))]
     t0 = time.perf_counter()
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -120,7 +129,8 @@ def write(records, path_md, path_png):
              "\"global scale\" is the photo scaled by the best single factor.  Peak RSS "
              "includes Blender (bpy), the scene and its images: \"after read\" is that part.",
              ""]
-    main = [r for r in ok if r.get("proxy_setting", 0) == 0 and r["faces"] <= 120_000]
+    main = [r for r in ok if r.get("proxy_setting", 0) == 0 and r["faces"] <= 120_000
+            and not r.get("one_group")]
     if main:
         lines += ["## Rooms x presets (scan of ~100k triangles vs the clean room)", "",
                   "| room | preset | mesh | faces | proxy faces | leaves | links | time s | "
@@ -159,7 +169,7 @@ def write(records, path_md, path_png):
                     f"{np.max([p[0]['peak_mb'] for p in pairs]):.0f} MB")
         lines.append("")
     sizes = [r for r in ok if r["room"] == 0 and r["preset"] == "medium"
-             and r.get("proxy_setting", 0) == 0 and r["faces"] > 1000]
+             and r.get("proxy_setting", 0) == 0 and r["faces"] > 1000 and not r.get("one_group")]
     if sizes:
         lines += ["## Memory and time against the mesh size (room 0, medium)", "",
                   "| faces | time s | read s | peak RSS MB | after read MB | precompute MB "
@@ -178,6 +188,25 @@ def write(records, path_md, path_png):
         lines.append(f"Timings of the largest ({big['faces']:,} faces), s: " + ", ".join(
             f"{k} {v:.1f}" for k, v in big["timings"].items()) + ".")
         lines.append("")
+    one = [r for r in ok if r.get("one_group")]
+    if one:
+        lines += ["## One object, one material (a real scan)", "",
+                  "The family's scans keep a group (a Blender object and material) per surface; "
+                  "a real scan is usually one object with one material.  The same scans with "
+                  "every surface face in one group (the shadow-edge vote then tells surfaces "
+                  "apart by their facing and place only), at medium:", "",
+                  "| room | faces | time s | lamp off: all / shadow, one group | per-surface "
+                  "groups |", "|---|---:|---:|---|---|"]
+        grouped = {(r["room"], r["preset"]): r for r in main if r["faces"] > 1000}
+        for r in sorted(one, key=lambda r: r["room"]):
+            g = grouped.get((r["room"], r["preset"]))
+            lines.append(f"| {r['room']} | {r['faces']:,} | {r['seconds']:.1f} | "
+                         f"{_f(r['relit_all'])} / {_f(r['relit_shadow'])} | " +
+                         (f"{_f(g['relit_all'])} / {_f(g['relit_shadow'])} |" if g else "- |"))
+        lines += ["", f"One group: {np.mean([r['relit_all'] for r in one]):.2f} (worst "
+                  f"{np.max([r['relit_all'] for r in one]):.2f}) / "
+                  f"{np.nanmean([r['relit_shadow'] for r in one]):.2f} (worst "
+                  f"{np.nanmax([r['relit_shadow'] for r in one]):.2f}) over {len(one)} rooms.", ""]
     scans = [r for r in ok if r["faces"] > 1000]
     if scans:
         sys.path.insert(0, str(ROOT))
@@ -252,15 +281,24 @@ def write(records, path_md, path_png):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--child", nargs=4)
+    ap.add_argument("--child", nargs="+")
+    ap.add_argument("--one-group-only", action="store_true",
+                    help="rerun the one-group scans only, into the existing results")
     ap.add_argument("--quick", action="store_true", help="the size scaling only")
     ap.add_argument("--rooms", nargs="*", type=int, default=list(ROOMS))
     ap.add_argument("--presets", nargs="*", default=list(PRESETS))
     ap.add_argument("--faces", type=int, default=100_000)
     args = ap.parse_args(argv)
     if args.child:
-        room, faces, preset, pf = args.child
-        child(int(room), int(faces), preset, int(pf))
+        room, faces, preset, pf = args.child[:4]
+        child(int(room), int(faces), preset, int(pf), len(args.child) > 4 and args.child[4] == "1")
+        return
+    if args.one_group_only:
+        records = [r for r in json.loads((RESULTS / "scan_raw.json").read_text())
+                   if not r.get("one_group")]
+        records += [run(room, args.faces, "medium", one_group=True) for room in args.rooms]
+        (RESULTS / "scan_raw.json").write_text(json.dumps(records, indent=1))
+        write(records, RESULTS / "scan.md", RESULTS / "scan.png")
         return
     records = []
     for n in SIZES:
@@ -273,6 +311,7 @@ def main(argv=None):
                 records.append(run(room, 0, preset))
                 if not (room == 0 and preset == "medium" and args.faces in SIZES):
                     records.append(run(room, args.faces, preset))
+        records += [run(room, args.faces, "medium", one_group=True) for room in args.rooms]
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "scan_raw.json").write_text(json.dumps(records, indent=1))
     write(records, RESULTS / "scan.md", RESULTS / "scan.png")
