@@ -67,3 +67,23 @@ def test_a_panel_lit_from_both_sides_gets_a_back():
     sol = solve_radiosity(o.scene, "draft", seed=2)
     B = sol.patch_radiosity()
     assert B[back].sum() > 0.3 * B[panel].sum()
+
+
+def test_faces_looked_at_in_chunks_decide_as_at_once(monkeypatch):
+    """A scan's faces are looked at CHUNK at a time (its rays at once held 620 MB at 200k
+    faces): in chunks of 7 faces, the outward faces and the panel's back come out the same,
+    and each face's evidence lands on that face (not another chunk's)."""
+    import relight_addon.core.relight.orient as orient_module
+    wrong = list(range(0, 24, 3))
+    sc = _room(outward=wrong, panel=True)
+    occ = make_occluder(sc.occluder_triangles())
+    whole = orient(sc, occ)
+    faces = np.flatnonzero(sc.lamp < 0)
+    lit, camera, _ = orient_module.side_evidence(sc, occ, faces)
+    monkeypatch.setattr(orient_module, "CHUNK", 7)
+    chunked = orient(sc, occ)
+    assert np.array_equal(chunked.flipped, whole.flipped)
+    assert chunked.back_of.tolist() == whole.back_of.tolist() == [24]
+    lit7, camera7, _ = orient_module.side_evidence(sc, occ, faces)
+    assert np.array_equal(camera7, camera)
+    np.testing.assert_allclose(lit7, lit, rtol=0.25, atol=1e-3 * lit.max())
