@@ -433,8 +433,9 @@ class SmoothRead:
         tree = cKDTree(centre)
         k = min(neighbours, len(leaves))
         n = len(points)
-        self.index = np.empty((n, k), np.int64)
-        self.weight = np.empty((n, k))
+        # int32 / float32: 128 bytes a texel instead of 256 (6.8 M texels of photos: 0.9 GB)
+        self.index = np.empty((n, k), np.int32)
+        self.weight = np.empty((n, k), np.float32)
         for c0 in range(0, n, CHUNK):
             p = points[c0:c0 + CHUNK]
             d, idx = tree.query(p, k=k)
@@ -452,5 +453,9 @@ class SmoothRead:
 
     def __call__(self, leaf_values):
         v = np.asarray(leaf_values, np.float64)
-        return np.einsum("tk,tkc->tc", self.weight, v.reshape(len(v), -1)[self.index]).reshape(
-            (len(self.index),) + v.shape[1:])
+        flat = v.reshape(len(v), -1)
+        out = np.empty((len(self.index), flat.shape[1]))
+        for c0 in range(0, len(out), CHUNK):      # the gathered (chunk, k, c) values only
+            rows = slice(c0, c0 + CHUNK)
+            out[rows] = np.einsum("tk,tkc->tc", self.weight[rows], flat[self.index[rows]])
+        return out.reshape((len(self.index),) + v.shape[1:])
