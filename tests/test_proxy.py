@@ -361,7 +361,7 @@ def test_a_clean_model_sent_through_the_proxy_path_relights_as_itself(monkeypatc
 def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
     """Over the memory limit (8 GB by default), the error names the phase that needs it: a
     mesh of 20 M faces cannot be helped by a coarser proxy (its own faces need ~10 GB), a
-    proxy of 150k triangles can."""
+    proxy of 150k triangles can, and photos of 64 M texels need smaller photos."""
     pytest.importorskip("bpy")
     import importlib
     from types import SimpleNamespace
@@ -371,21 +371,25 @@ def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
     precompute = importlib.import_module(PACKAGE + ".operators.precompute")
 
     class Mesh:                                   # what memory_error reads of a SceneData
-        images = None
-
-        def __init__(self, faces):
+        def __init__(self, faces, photo=0):
             self.n_patches = faces
+            # one photo of photo x photo texels that every face uses (shapes only are read)
+            self.images = [np.broadcast_to(np.float32(0.5), (photo, photo, 3))] if photo else None
+            self.image = np.zeros(faces, np.int32) if photo else None
 
         def area_normal(self):
             return np.full(self.n_patches, 100.0 / self.n_patches), None
 
-    def error(faces, proxy_faces):
+    def error(faces, proxy_faces, photo=0):
         context = SimpleNamespace(preferences=SimpleNamespace(addons={}),
                                   scene=SimpleNamespace(relight=SimpleNamespace(
                                       proxy_faces=proxy_faces)))
-        return precompute.memory_error(context, Mesh(faces), "medium")
+        return precompute.memory_error(context, Mesh(faces, photo), "medium")
 
     assert error(2_000_000, 0) is None                  # a 2 M-face scan fits in 8 GB
     assert "decimate the mesh" in error(20_000_000, 0)
     lower = error(2_000_000, 150_000)
     assert "lower Proxy Faces" in lower and "decimate the mesh" not in lower
+    # photos of 64 M texels: placing and lighting their texels is what needs the memory
+    photos = error(200_000, 0, photo=8192)
+    assert "smaller photos" in photos and "decimate" not in photos and "Proxy" not in photos

@@ -32,13 +32,17 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
   faces) goes through phases one after another, and its peak is the largest of them: the mesh's
   (turning faces, decimating, placing the texels: ``MESH_BYTES`` + ``FACE_BYTES`` per input
-  face), the proxy's solve (``PROXY_SOLVE_BYTES[preset]``: fixed + per proxy triangle), and the
+  face, and ``PLACE_TEXEL_BYTES`` per texel of its photos, located on the proxy), the proxy's solve (``PROXY_SOLVE_BYTES[preset]``: fixed + per proxy triangle), and the
   texel work over what the solution holds meanwhile (``PROXY_HELD`` of the solve).  Measured
   (benchmarks/results/scan.md; the phases' peaks over the read, sampled): family rooms 0, 3,
   5, 16 (and the tests' room 20) as scans of 20k-200k faces: the mesh 235-300 MB (flat: it
   works in chunks), the solve at draft (1,000 triangles) 344-430, medium (3,000) 459-607
   (1,000: 416, 6,000: 722), high (3,000) 707-827 (6,000: 1,539), ultra (3,000) 4,511; the
-  texels 250-620 (106k texels).  The same case varies by +-14 % from run to run (room 20's
+  texels 250-620 (106k texels).  With photos of 1.7 M, 6.8 M and 15.3 M texels (room 0's
+  100k-face scan at medium, its bakes upscaled) the placing of the texels rose to 941, 1,683
+  and 2,087 MB, the peaks to 1,321, 1,940 and 2,421 MB (+ BASE_BYTES): less than linear in
+  the texels, so the one per-texel term (~200 bytes) gives 1.21x, 0.88x and 1.38x of them
+  (over, the safe side, at photo resolution).  The same case varies by +-14 % from run to run (room 20's
   scan at medium: 514 and 606 MB), so the lines sit ~10 % above the runs' mean rather than
   above the largest: within 25 % of every run (the issue's target), below the largest by up
   to 5 %.
@@ -84,6 +88,7 @@ STREAM_TEXEL_LAMP_BYTES = 18
 # while the texels are lit.  Ultra's from one solve.
 MESH_BYTES = 300 * 2**20
 FACE_BYTES = 512
+PLACE_TEXEL_BYTES = 200
 PROXY_SOLVE_BYTES = {"draft": (370 * 2**20, 70 * 2**10),
                      "medium": (370 * 2**20, 70 * 2**10),
                      "high": (0, 265 * 2**10),
@@ -140,19 +145,22 @@ def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) ->
     faces = int(proxy_faces) or quality.proxy_faces
     if proxy and patches > PROXY_FACTOR * faces:
         return int(BASE_BYTES + max(proxy_phases(quality, patches, faces,
-                                                 estimate_texel_memory(scene_data)).values()))
+                                                 estimate_texel_memory(scene_data),
+                                                 texels_and_lamps(scene_data)[0] or 0).values()))
     return int(BASE_BYTES + solve_bytes(quality, areas) + estimate_texel_memory(scene_data))
 
 
-def proxy_phases(quality, patches, faces, texel_bytes) -> dict:
+def proxy_phases(quality, patches, faces, texel_bytes, texels=0) -> dict:
     """Bytes of each phase of a mesh of ``patches`` faces solved on a proxy of ``faces``
-    triangles (module docstring): {"mesh", "solve", "texels"}."""
+    triangles, whose photos have ``texels`` texels and cost ``texel_bytes`` to light (module
+    docstring): {"mesh", "solve", "texels"}."""
     order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
     name = _nearest_named(quality)
     solve = max(fixed + per_triangle * faces             # never less than a coarser preset's
                 for fixed, per_triangle in (PROXY_SOLVE_BYTES[k]
                                             for k in order[:order.index(name) + 1]))
-    return {"mesh": MESH_BYTES + FACE_BYTES * patches, "solve": solve,
+    return {"mesh": MESH_BYTES + FACE_BYTES * patches + PLACE_TEXEL_BYTES * texels,
+            "solve": solve,
             "texels": PROXY_HELD * solve + texel_bytes}
 
 
@@ -166,20 +174,27 @@ def _nearest_named(quality):
 
 def estimate_texel_memory(scene_data) -> int:
     """Bytes the shadow-free texture step adds for the images the patches use."""
-    images = getattr(scene_data, "images", None) or []
-    image_of = getattr(scene_data, "image", None)
-    if not images or image_of is None:
+    texels, lamps = texels_and_lamps(scene_data)
+    if texels is None:
         return 0
-    used = set(int(i) for i in np.unique(image_of) if i >= 0)
-    texels = 0
-    for i in used:
-        tex = getattr(images[i], "texels", images[i])
-        texels += int(np.prod(np.shape(tex)[:2]))
-    lamps = int(getattr(scene_data, "n_lamps", 1))
     from ..relight.texel import CACHE_BYTES
     if 48 * texels * max(lamps, 1) > CACHE_BYTES:        # streamed (texel.TexelLight)
         return int(STREAM_BYTES + texels * (STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps))
     return int(RAY_CHUNK_BYTES + texels * (TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps))
+
+
+def texels_and_lamps(scene_data):
+    """Texels of the images the patches use (None: no images), and the lamps."""
+    images = getattr(scene_data, "images", None) or []
+    image_of = getattr(scene_data, "image", None)
+    lamps = int(getattr(scene_data, "n_lamps", 1))
+    if not images or image_of is None:
+        return None, lamps
+    texels = 0
+    for i in set(int(i) for i in np.unique(image_of) if i >= 0):
+        tex = getattr(images[i], "texels", images[i])
+        texels += int(np.prod(np.shape(tex)[:2]))
+    return texels, lamps
 
 
 def give_back_memory():
