@@ -93,7 +93,8 @@ def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1):
     proxy = res.solution.context.get("proxy")
     print(json.dumps({
         "room": room, "faces": int(r.data.n_patches), "preset": preset,
-        "proxy_setting": proxy_faces, "one_group": bool(one_group), "read_s": read_s, "seconds": seconds,
+        "proxy_setting": proxy_faces, "one_group": bool(one_group), "read_s": read_s,
+        "seconds": seconds,
         "rss_read_mb": rss_read, "peak_mb": peak, "estimate_mb": estimate,
         "estimate_without_proxy_mb": without_proxy,
         "proxy_faces": int(st.get("proxy_faces", 0)), "leaves": int(st["leaves"]),
@@ -133,6 +134,9 @@ def _f(x, nd=2):
 
 def write(records, path_md, path_png):
     import numpy as np
+    sys.path.insert(0, str(ROOT))
+    from relight_addon.core.radiosity.memory import BASE_BYTES
+    base = BASE_BYTES / 2**20                     # what the estimate counts over the read
     photos = [r for r in records if r.get("status") == "ok" and r.get("photo_up", 1) > 1]
     ok = [r for r in records if r.get("status") == "ok" and r.get("photo_up", 1) == 1]
     lines = ["# Scanned rooms: dense noisy meshes solved on a proxy", "",
@@ -225,9 +229,6 @@ def write(records, path_md, path_png):
                   f"{np.nanmax([r['relit_shadow'] for r in one]):.2f}) over {len(one)} rooms.", ""]
     scans = [r for r in ok if r["faces"] > 1000]
     if scans:
-        sys.path.insert(0, str(ROOT))
-        from relight_addon.core.radiosity.memory import BASE_BYTES
-        base = BASE_BYTES / 2**20
         ratio = [(r, r["estimate_mb"] / (r["peak_mb"] - r["rss_read_mb"] + base)) for r in scans]
         lines += ["## The memory estimate on scans", "",
                   "What the operator checks before it starts (core/radiosity/memory.py), against "
@@ -245,9 +246,6 @@ def write(records, path_md, path_png):
         lines += ["", f"All {len(q)} scan cases: {min(q):.2f}-{max(q):.2f} "
                   f"({sum(abs(x - 1) <= 0.25 for x in q)} within 25 %).", ""]
     if photos:
-        sys.path.insert(0, str(ROOT))
-        from relight_addon.core.radiosity.memory import BASE_BYTES
-        base = BASE_BYTES / 2**20
         lines += ["## Photo-resolution textures on a scan (room 0, ~100k faces, medium)", "",
                   "The same scan with every photo upscaled (its texels repeated): memory and "
                   "time only (the truth no longer matches texel for texel).", "",
@@ -328,17 +326,15 @@ def main(argv=None):
         child(int(room), int(faces), preset, int(pf), len(args.child) > 4 and args.child[4] == "1",
               int(args.child[5]) if len(args.child) > 5 else 1)
         return
-    if args.photos_only:
-        records = [r for r in json.loads((RESULTS / "scan_raw.json").read_text())
-                   if r.get("photo_up", 1) == 1]
-        records += [run(0, args.faces, "medium", photo_up=up) for up in PHOTO_UPSCALES]
-        (RESULTS / "scan_raw.json").write_text(json.dumps(records, indent=1))
-        write(records, RESULTS / "scan.md", RESULTS / "scan.png")
-        return
-    if args.one_group_only:
-        records = [r for r in json.loads((RESULTS / "scan_raw.json").read_text())
-                   if not r.get("one_group")]
-        records += [run(room, args.faces, "medium", one_group=True) for room in args.rooms]
+    if args.photos_only or args.one_group_only:
+        # those cases run again, in place of theirs in the existing results
+        records = json.loads((RESULTS / "scan_raw.json").read_text())
+        if args.photos_only:
+            records = [r for r in records if r.get("photo_up", 1) == 1]
+            records += [run(0, args.faces, "medium", photo_up=up) for up in PHOTO_UPSCALES]
+        else:
+            records = [r for r in records if not r.get("one_group")]
+            records += [run(room, args.faces, "medium", one_group=True) for room in args.rooms]
         (RESULTS / "scan_raw.json").write_text(json.dumps(records, indent=1))
         write(records, RESULTS / "scan.md", RESULTS / "scan.png")
         return

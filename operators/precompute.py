@@ -107,10 +107,7 @@ def memory_error(context, data, preset):
     """Bad input check: an error message when the estimated peak memory of the solve exceeds
     the add-on preference ``memory_limit_gb`` (checked before solving; nothing is changed)."""
     from .. import preferences
-    from ..relight_addon.core.radiosity.memory import (FACE_BYTES, PLACE_TEXEL_BYTES,
-                                                       estimate_precompute_memory,
-                                                       estimate_texel_memory, proxy_phases,
-                                                       texels_and_lamps)
+    from ..relight_addon.core.radiosity.memory import estimate_precompute_memory, proxy_need
     from ..relight_addon.core.radiosity.presets import PROXY_FACTOR, get_preset
     faces = proxy_faces_of(context.scene)
     estimate = estimate_precompute_memory(data, preset, proxy_faces=faces)
@@ -120,16 +117,11 @@ def memory_error(context, data, preset):
     proxy = faces or get_preset(preset).proxy_faces
     if data.n_patches > PROXY_FACTOR * proxy:
         # name what makes the peak: the mesh itself, the proxy's solve or the photos
-        texels = texels_and_lamps(data)[0] or 0
-        phases = proxy_phases(get_preset(preset), data.n_patches, proxy,
-                              estimate_texel_memory(data), texels)
-        largest = max(phases, key=phases.get)
-        if largest == "mesh" and PLACE_TEXEL_BYTES * texels > FACE_BYTES * data.n_patches:
-            largest = "texels"                 # placing the photos' texels on the proxy
-        if largest == "mesh":
+        need = proxy_need(data, preset, proxy)
+        if need == "faces":
             hint = (f"decimate the mesh first (its {data.n_patches} faces alone need that much: "
                     f"Blender's Decimate modifier)")
-        elif largest == "texels":
+        elif need == "photos":
             hint = "use smaller photos"
         else:
             hint = (f"lower Proxy Faces (now {proxy}: the {data.n_patches} faces are solved on "

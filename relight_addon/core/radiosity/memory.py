@@ -30,10 +30,11 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   links a leaf; Cornell boxes of 1k-10k patches 2-3x less), ultra 1.15x; below it up to
   270 MB too much.  (Scans solved on a proxy have a model of their own, below.)
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
-  faces) goes through phases one after another, and its peak is the largest of them: the mesh's
-  (turning faces, decimating, placing the texels: ``MESH_BYTES`` + ``FACE_BYTES`` per input
-  face, and ``PLACE_TEXEL_BYTES`` per texel of its photos, located on the proxy), the proxy's solve (``PROXY_SOLVE_BYTES[preset]``: fixed + per proxy triangle), and the
-  texel work over what the solution holds meanwhile (``PROXY_HELD`` of the solve).  Measured
+  faces) goes through phases one after another, and its peak is the largest of them: the
+  mesh's (turning faces, decimating, placing the texels: ``MESH_BYTES`` + ``FACE_BYTES`` per
+  input face + ``PLACE_TEXEL_BYTES`` per texel of its photos), the proxy's solve
+  (``PROXY_SOLVE_BYTES[preset]``: fixed + per proxy triangle), and the texel work over what
+  the solution holds meanwhile (``PROXY_HELD`` of the solve).  Measured
   (benchmarks/results/scan.md; the phases' peaks over the read, sampled): family rooms 0, 3,
   5, 16 (and the tests' room 20) as scans of 20k-200k faces: the mesh 235-300 MB (flat: it
   works in chunks), the solve at draft (1,000 triangles) 344-430, medium (3,000) 459-607
@@ -42,10 +43,10 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   100k-face scan at medium, its bakes upscaled) the placing of the texels rose to 941, 1,683
   and 2,087 MB, the peaks to 1,321, 1,940 and 2,421 MB (+ BASE_BYTES): less than linear in
   the texels, so the one per-texel term (~200 bytes) gives 1.21x, 0.88x and 1.38x of them
-  (over, the safe side, at photo resolution).  The same case varies by +-14 % from run to run (room 20's
-  scan at medium: 514 and 606 MB), so the lines sit ~10 % above the runs' mean rather than
-  above the largest: within 25 % of every run (the issue's target), below the largest by up
-  to 5 %.
+  (over, the safe side, at photo resolution).  The same case varies by +-14 % from run to
+  run (room 20's scan at medium: 514 and 606 MB), so the lines sit ~10 % above the runs' mean
+  rather than above the largest: within 25 % of every run (the issue's target), below the
+  largest by up to 8 %.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
   every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
   ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
@@ -113,11 +114,10 @@ def solve_bytes(quality, areas) -> float:
     """The solve's bytes on patches of ``areas``: the largest of the lines of the preset and
     of the coarser ones (a finer preset never needs less).  A preset of another name is
     counted as the named one whose smallest element is nearest to its own."""
-    order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
     name = _nearest_named(quality)
     patches = int(np.count_nonzero(np.asarray(areas) > 0))
     out = 0.0
-    for k in order[:order.index(name) + 1]:
+    for k in _up_to(name):
         fixed, per_leaf, per_patch, at_most = SOLVE_BYTES[k]
         min_area = quality.min_area if k == name else PRESETS[k].min_area
         leaves = estimate_leaves(areas, min_area)
@@ -146,7 +146,7 @@ def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) ->
     if proxy and patches > PROXY_FACTOR * faces:
         return int(BASE_BYTES + max(proxy_phases(quality, patches, faces,
                                                  estimate_texel_memory(scene_data),
-                                                 texels_and_lamps(scene_data)[0] or 0).values()))
+                                                 _texels_and_lamps(scene_data)[0] or 0).values()))
     return int(BASE_BYTES + solve_bytes(quality, areas) + estimate_texel_memory(scene_data))
 
 
@@ -154,14 +154,33 @@ def proxy_phases(quality, patches, faces, texel_bytes, texels=0) -> dict:
     """Bytes of each phase of a mesh of ``patches`` faces solved on a proxy of ``faces``
     triangles, whose photos have ``texels`` texels and cost ``texel_bytes`` to light (module
     docstring): {"mesh", "solve", "texels"}."""
-    order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
-    name = _nearest_named(quality)
     solve = max(fixed + per_triangle * faces             # never less than a coarser preset's
                 for fixed, per_triangle in (PROXY_SOLVE_BYTES[k]
-                                            for k in order[:order.index(name) + 1]))
+                                            for k in _up_to(_nearest_named(quality))))
     return {"mesh": MESH_BYTES + FACE_BYTES * patches + PLACE_TEXEL_BYTES * texels,
             "solve": solve,
             "texels": PROXY_HELD * solve + texel_bytes}
+
+
+def proxy_need(scene_data, preset, proxy_faces=0) -> str:
+    """What sets the peak of ``scene_data`` solved on a proxy (what to lower when it is too
+    much): "faces" (the mesh's own phase), "solve" (the proxy's) or "photos" (placing their
+    texels on the proxy, or lighting them)."""
+    quality = get_preset(preset)
+    patches = scene_data.n_patches
+    texels = _texels_and_lamps(scene_data)[0] or 0
+    phases = proxy_phases(quality, patches, int(proxy_faces) or quality.proxy_faces,
+                          estimate_texel_memory(scene_data), texels)
+    largest = max(phases, key=phases.get)
+    if largest == "mesh":
+        return "photos" if PLACE_TEXEL_BYTES * texels > FACE_BYTES * patches else "faces"
+    return "photos" if largest == "texels" else "solve"
+
+
+def _up_to(name):
+    """The named presets from the coarsest to ``name``."""
+    order = sorted(SOLVE_BYTES, key=lambda k: -PRESETS[k].min_area)
+    return order[:order.index(name) + 1]
 
 
 def _nearest_named(quality):
@@ -174,7 +193,7 @@ def _nearest_named(quality):
 
 def estimate_texel_memory(scene_data) -> int:
     """Bytes the shadow-free texture step adds for the images the patches use."""
-    texels, lamps = texels_and_lamps(scene_data)
+    texels, lamps = _texels_and_lamps(scene_data)
     if texels is None:
         return 0
     from ..relight.texel import CACHE_BYTES
@@ -183,7 +202,7 @@ def estimate_texel_memory(scene_data) -> int:
     return int(RAY_CHUNK_BYTES + texels * (TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps))
 
 
-def texels_and_lamps(scene_data):
+def _texels_and_lamps(scene_data):
     """Texels of the images the patches use (None: no images), and the lamps."""
     images = getattr(scene_data, "images", None) or []
     image_of = getattr(scene_data, "image", None)
