@@ -479,9 +479,21 @@ def _space_cells(scene, tm, rows, per_patch):
     axis = np.argmax(np.abs(n), axis=1)
     facing = 2 * axis + (n[np.arange(len(n)), axis] > 0)
     pos = bilinear_point(scene.corners[patch], tm.u[rows], tm.v[rows])
-    key = np.column_stack([np.asarray(scene.group)[patch], facing,
-                           np.floor(pos / size).astype(np.int64)])
-    return np.unique(key, axis=0, return_inverse=True)[1].ravel()
+    cell = np.floor(pos / size).astype(np.int64)
+    columns = [np.asarray(scene.group)[patch], facing, cell[:, 0], cell[:, 1], cell[:, 2]]
+    return _row_labels(columns)
+
+
+def _row_labels(columns):
+    """np.unique(np.column_stack(columns), axis=0, return_inverse=True)[1] a column at a time:
+    the same labels (rows in lexicographic order) without the (n, c) sorting copies (107 MB
+    for a photo-resolution map's million pairs)."""
+    label = np.zeros(len(columns[0]), np.int64)
+    for col in columns:
+        rank = np.unique(col, return_inverse=True)[1].ravel()
+        label = np.unique(label * (int(rank.max(initial=0)) + 1) + rank,
+                          return_inverse=True)[1].ravel()
+    return label
 
 
 def _parabola_vertex(left, mid, right):

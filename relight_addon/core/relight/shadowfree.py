@@ -346,7 +346,7 @@ def _texel_light(scene, tm, occluder, opt, seed, proxy, solution_texels):
     lifted over its bumps, the solution read by the proxy's kernel."""
     return TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, seed,
                       solution_texels=solution_texels,
-                      normals=None if proxy is None else proxy.normals[tm.patch],
+                      face_normals=None if proxy is None else proxy.normals,
                       smooth_read=proxy is not None,
                       offset=0.0 if proxy is None else BUMPS * proxy.roughness)
 

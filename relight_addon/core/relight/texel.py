@@ -39,9 +39,11 @@ class TexelLight:
     lamp patch, each texel's footprint sampled on a ``samples`` x ``samples`` grid."""
 
     def __init__(self, scene, tm, occluder, rays=32, samples=2, seed=0, solution_texels=None,
-                 normals=None, smooth_read=False, offset=0.0, first=0):
+                 face_normals=None, smooth_read=False, offset=0.0, first=0):
         self.scene, self.tm, self.occluder = scene, tm, occluder
-        self.normals = normals        # (T, 3) shading normals instead of the faces' own
+        # (p, 3) shading normals of the scene's faces instead of their own, read at each
+        # texel's face when needed (a (T, 3) copy is 24 bytes a texel: 370 MB at 15 M)
+        self.face_normals = face_normals
         # indirect light read by a kernel over the leaves (radiosity.proxy.SmoothRead) instead
         # of interpolated over the solution's elements
         self.smooth_read = smooth_read
@@ -74,8 +76,7 @@ class TexelLight:
         sl = slice(start, stop)
         part = TexelLight(self.scene, self.tm.rows(start, stop), self.occluder, self.rays,
                           self.samples, self.seed, self.solution_texels.rows(start, stop),
-                          None if self.normals is None else self.normals[sl], self.smooth_read,
-                          self.offset, self.first + start)
+                          self.face_normals, self.smooth_read, self.offset, self.first + start)
         if self._direct is not None:
             part._direct = (self._direct[0][sl], self._direct[1][sl])
         return part
@@ -97,8 +98,7 @@ class TexelLight:
         part = TexelLight(self.scene, tm, self.occluder, self.rays, self.samples, self.seed + 1,
                           tm if self.solution_texels is self.tm else
                           texel_subset(self.solution_texels, mask),
-                          None if self.normals is None else self.normals[rows],
-                          self.smooth_read, self.offset)
+                          self.face_normals, self.smooth_read, self.offset)
         if self._direct is not None:
             part._direct = (self._direct[0][rows], self._direct[1][rows])
         self._subset = (key, part)
@@ -140,8 +140,9 @@ class TexelLight:
             from ..radiosity.proxy import SmoothRead
             tm = self.tm
             points = bilinear_point(self.scene.corners[tm.patch], tm.u, tm.v)
-            normals = self.normals if self.normals is not None else \
-                self.scene.area_normal()[1][tm.patch]
+            faces = self.face_normals if self.face_normals is not None else \
+                self.scene.area_normal()[1]
+            normals = faces[tm.patch]
             read = SmoothRead(sol.hierarchy, sol.leaves, points, normals)
         else:
             stm = self.solution_texels
@@ -177,8 +178,8 @@ class TexelLight:
             pts, nrm, n_sub = footprint_points(scene, patch[sl], u[sl], v[sl], centre[sl],
                                                size[sl], self.samples)
             # the mean over each texel's footprint (a photo texel integrates it too)
-            if self.normals is not None:
-                nrm = np.repeat(self.normals[sl], n_sub, axis=0)
+            if self.face_normals is not None:
+                nrm = np.repeat(self.face_normals[patch[sl]], n_sub, axis=0)
             U[sl], O[sl] = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub],
                                            self.occluder, self.rays,
                                            self.seed + 11 + first + c0, offset=self.offset)
