@@ -361,7 +361,7 @@ def test_a_clean_model_sent_through_the_proxy_path_relights_as_itself(monkeypatc
 def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
     """Over the memory limit (8 GB by default), the error names the phase that needs it: a
     mesh of 20 M faces cannot be helped by a coarser proxy (its own faces need ~10 GB), a
-    proxy of 150k triangles can, and photos of 64 M texels need smaller photos."""
+    proxy of 150k triangles can, and a photo of 151 M texels needs smaller ones."""
     pytest.importorskip("bpy")
     import importlib
     from types import SimpleNamespace
@@ -390,6 +390,6 @@ def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
     assert "decimate the mesh" in error(20_000_000, 0)
     lower = error(2_000_000, 150_000)
     assert "lower Proxy Faces" in lower and "decimate the mesh" not in lower
-    # photos of 64 M texels: placing and lighting their texels is what needs the memory
-    photos = error(200_000, 0, photo=8192)
+    # a photo of 151 M texels: placing and lighting its texels is what needs the memory
+    photos = error(200_000, 0, photo=12288)
     assert "smaller photos" in photos and "decimate" not in photos and "Proxy" not in photos

@@ -89,7 +89,7 @@ STREAM_TEXEL_LAMP_BYTES = 18
 # while the texels are lit.  Ultra's from one solve.
 MESH_BYTES = 300 * 2**20
 FACE_BYTES = 512
-PLACE_TEXEL_BYTES = 200
+PLACE_TEXEL_BYTES = 48
 PROXY_SOLVE_BYTES = {"draft": (370 * 2**20, 70 * 2**10),
                      "medium": (370 * 2**20, 70 * 2**10),
                      "high": (0, 265 * 2**10),

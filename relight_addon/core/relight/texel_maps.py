@@ -23,7 +23,7 @@ from . import texel
 from .texel import leaf_indirect
 from .transport import Transport, as_given
 
-BLOCK = 32 * texel.TEXEL_CHUNK     # texels per block: ~300 MB of working arrays at 4 lamps
+BLOCK = 16 * texel.TEXEL_CHUNK     # texels per block: ~150 MB of working arrays at 4 lamps
 
 
 @dataclass
