@@ -375,6 +375,7 @@ VOTE_STEP = 2                                 # grid steps (0.25 in log g)
 VOTE_MIN_PAIRS = 200
 VOTE_GRID = np.linspace(-2.0, 2.0, 33)       # log g
 VOTE_PAIRS = 300_000                          # pairs sampled for the vote (seeded)
+CELLS_CHUNK = 1 << 16                         # pairs placed in space cells at once
 VOTE_MIN_PIECES = 5
 VOTE_MIN_COVER = 0.5       # of the pairs, in pieces large enough to vote
 VOTE_BOOTSTRAP = 400
@@ -478,8 +479,11 @@ def _space_cells(scene, tm, rows, per_patch):
     n = normal[patch]
     axis = np.argmax(np.abs(n), axis=1)
     facing = 2 * axis + (n[np.arange(len(n)), axis] > 0)
-    pos = bilinear_point(scene.corners[patch], tm.u[rows], tm.v[rows])
-    cell = np.floor(pos / size).astype(np.int64)
+    u, v = tm.u[rows], tm.v[rows]
+    cell = np.empty((len(rows), 3), np.int64)
+    for c0 in range(0, len(rows), CELLS_CHUNK):    # (n, 4, 3) corners for a million pairs: 96 MB
+        sl = slice(c0, c0 + CELLS_CHUNK)
+        cell[sl] = np.floor(bilinear_point(scene.corners[patch[sl]], u[sl], v[sl]) / size)
     columns = [np.asarray(scene.group)[patch], facing, cell[:, 0], cell[:, 1], cell[:, 2]]
     return _row_labels(columns)
 

@@ -21,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..radiosity.exposure import read_in_the_open
+from ..radiosity.memory import give_back_memory
 from ..scene import bilinear_point
 from ..texture.colour import luminance
 from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
@@ -124,8 +125,11 @@ class TexelLight:
         at the exitance factors ``scale``: what the exitance fit reads, with only the
         luminance of the direct light kept once cast (a sample of a photo-resolution map)."""
         if self._direct_luminance is None:
-            self._direct_luminance = luminance(self._direct[1]).T if self._direct is not None \
-                else self._cast(luminance_only=True)                          # (k, T)
+            if self._direct is not None:
+                self._direct_luminance = luminance(self._direct[1]).T            # (k, T)
+            else:
+                self._direct_luminance = self._cast(luminance_only=True)
+                give_back_memory()       # the casting threads' freed chunks (their own heaps)
         occ, _ = leaf_indirect(sol, unoccluded=False)
         read = self.reader(sol)
         indirect = np.stack([read(luminance(x)) for x in occ])
