@@ -30,10 +30,10 @@ from relight_addon.core.relight import texel
 up, mode = int(sys.argv[1]), sys.argv[2]
 cast = {"s": 0.0}
 _cast = texel.TexelLight._cast
-def timed_cast(self):        # wall time of the per-texel direct light (the rays and their set-up)
+def timed_cast(self, *args, **kwargs):   # wall time of the per-texel direct light (the rays and their set-up)
     t = time.perf_counter()
     try:
-        return _cast(self)
+        return _cast(self, *args, **kwargs)
     finally:
         cast["s"] += time.perf_counter() - t
 texel.TexelLight._cast = timed_cast
