@@ -39,14 +39,15 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   5, 16 (and the tests' room 20) as scans of 20k-200k faces: the mesh 235-300 MB (flat: it
   works in chunks), the solve at draft (1,000 triangles) 344-430, medium (3,000) 459-607
   (1,000: 416, 6,000: 722), high (3,000) 707-827 (6,000: 1,539), ultra (3,000) 4,511; the
-  texels 250-620 (106k texels).  With photos of 1.7 M, 6.8 M and 15.3 M texels (room 0's
-  100k-face scan at medium, its bakes upscaled) the placing of the texels rose to 941, 1,683
-  and 2,087 MB, the peaks to 1,321, 1,940 and 2,421 MB (+ BASE_BYTES): less than linear in
-  the texels, so the one per-texel term (~200 bytes) gives 1.21x, 0.88x and 1.38x of them
-  (over, the safe side, at photo resolution).  The same case varies by +-14 % from run to
-  run (room 20's scan at medium: 514 and 606 MB), so the lines sit ~10 % above the runs' mean
-  rather than above the largest: within 25 % of every run (the issue's target), below the
-  largest by up to 8 %.
+  texels 250-620 (106k texels).  With photos of 1.7 M, 6.6 M and 14.9 M texels (room 0's
+  100k-face scan at medium, its bakes upscaled) the peaks were 1,204, 1,362 and 1,794 MB
+  (+ BASE_BYTES), the texel work's (the exitance fit's sample, the maps), placing the texels
+  957 MB at 15 M, 300 of it the mesh phase's own (~48 bytes a texel): the texel work by the
+  shadow-free textures' model below gives 1.33x, 0.88x and 1.10x of them (images of up to
+  PHOTO_TEXELS hold float64 texel parameters, as 6.6 M's do).  The same case varies by
+  +-14 % from run to run (room 20's scan at medium: 514 and 606 MB), so the lines sit ~10 %
+  above the runs' mean rather than above the largest: within 25 % of every run (the issue's
+  target), below the largest by up to 8 %.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
   every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
   ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
@@ -54,8 +55,8 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   it (photo resolution: the light cast and the maps written block by block, the exitance fit
   on a sample) ``STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps`` over
   ``STREAM_BYTES`` (the fit's sample and a block): the photos read, the texel map, the
-  textures and maps written (measured: 648 MB at 4.7 M texels, 1650 MB at 16.5 M over the
-  process's own 209 MB; benchmarks/results/texel_scaling.md).
+  textures and maps written (measured: 581 MB at 4.7 M texels, 1642 MB at 16.5 M over the
+  process's own 206 MB; benchmarks/results/texel_scaling.md).
 """
 from __future__ import annotations
 
