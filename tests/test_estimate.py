@@ -226,3 +226,17 @@ def test_on_a_fine_tessellation_cells_of_space_vote_not_the_few_large_patches():
     g, sigma = _vote_g(D, I, dl, SimpleNamespace(patch=cells, u=u, v=v), a, b,
                        np.ones(cells.max() + 1))
     assert abs(np.log(g / 2.0)) < 0.13 and sigma < 0.2, (g, sigma)
+
+
+def test_space_cells_are_labelled_as_unique_rows():
+    """The shadow-edge vote's space cells are labelled a column at a time: the labels of
+    np.unique over the rows (lexicographic order), on rows with negative, repeated and
+    single values."""
+    from relight_addon.core.relight.exitance import _row_labels
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 7, 5000):
+        cols = [rng.integers(0, 3, n), rng.integers(0, 6, n), rng.integers(-40, 40, n),
+                rng.integers(-2, 2, n), np.full(n, 5)]
+        want = np.unique(np.column_stack(cols), axis=0, return_inverse=True)[1].ravel() \
+            if n else np.zeros(0, np.int64)
+        assert np.array_equal(_row_labels(cols), want)

@@ -406,3 +406,20 @@ def test_blocks_give_the_whole_maps(office, results, photo_resolution):
     for i in m1:
         assert np.array_equal(m1[i], m2[i]) and np.array_equal(d1[i], d2[i])
         assert m1[i].any()
+
+
+def test_the_fit_sample_casts_the_luminance_of_the_whole_cast(office, results, monkeypatch):
+    """The exitance fit's sample of a photo-resolution map keeps only the luminance of each
+    lamp's occluded light, (k, T), cast chunk by chunk: the same values as the luminance of
+    the full cast, lamp by lamp (a transposed or shifted chunk fails)."""
+    from relight_addon.core.relight import texel
+    from relight_addon.core.texture.colour import luminance
+    monkeypatch.setattr(texel, "TEXEL_CHUNK", 1024)          # several chunks, both casts
+    res = results["texel"]
+    light = res.texel_light()
+    assert res.texel_map.n_texels > 3 * texel.TEXEL_CHUNK
+    U, O = light._cast()
+    lum = light._cast(luminance_only=True)
+    assert lum.shape == (res.scene.n_lamps, res.texel_map.n_texels)
+    np.testing.assert_allclose(lum, luminance(O).T, rtol=1e-12, atol=0)
+    assert (lum > 0).any(axis=1).all()                   # every lamp lights some texel
