@@ -145,9 +145,7 @@ def estimate_precompute_memory(scene_data, preset, proxy=True, proxy_faces=0) ->
     patches = int(np.count_nonzero(np.asarray(areas) > 0))
     faces = int(proxy_faces) or quality.proxy_faces
     if proxy and patches > PROXY_FACTOR * faces:
-        return int(BASE_BYTES + max(proxy_phases(quality, patches, faces,
-                                                 estimate_texel_memory(scene_data),
-                                                 _texels_and_lamps(scene_data)[0] or 0).values()))
+        return int(BASE_BYTES + max(_phases_of(scene_data, quality, patches, faces)[0].values()))
     return int(BASE_BYTES + solve_bytes(quality, areas) + estimate_texel_memory(scene_data))
 
 
@@ -169,13 +167,19 @@ def proxy_need(scene_data, preset, proxy_faces=0) -> str:
     texels on the proxy, or lighting them)."""
     quality = get_preset(preset)
     patches = scene_data.n_patches
-    texels = _texels_and_lamps(scene_data)[0] or 0
-    phases = proxy_phases(quality, patches, int(proxy_faces) or quality.proxy_faces,
-                          estimate_texel_memory(scene_data), texels)
+    phases, texels = _phases_of(scene_data, quality, patches,
+                                int(proxy_faces) or quality.proxy_faces)
     largest = max(phases, key=phases.get)
     if largest == "mesh":
         return "photos" if PLACE_TEXEL_BYTES * texels > FACE_BYTES * patches else "faces"
     return "photos" if largest == "texels" else "solve"
+
+
+def _phases_of(scene_data, quality, patches, faces):
+    """:func:`proxy_phases` of a scene's ``patches`` faces and its photos, and their texels."""
+    texels, lamps = _texels_and_lamps(scene_data)
+    return proxy_phases(quality, patches, faces, _texel_bytes(texels, lamps), texels or 0), \
+        texels or 0
 
 
 def _up_to(name):
@@ -194,7 +198,11 @@ def _nearest_named(quality):
 
 def estimate_texel_memory(scene_data) -> int:
     """Bytes the shadow-free texture step adds for the images the patches use."""
-    texels, lamps = _texels_and_lamps(scene_data)
+    return _texel_bytes(*_texels_and_lamps(scene_data))
+
+
+def _texel_bytes(texels, lamps) -> int:
+    """That for ``texels`` texels (None: no images) lit by ``lamps`` lamps."""
     if texels is None:
         return 0
     from ..relight.texel import CACHE_BYTES

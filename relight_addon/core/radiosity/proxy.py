@@ -452,7 +452,7 @@ class SmoothRead:
         tree = cKDTree(centre)
         k = min(neighbours, len(leaves))
         n = len(points)
-        # uint16 (under 65,536 leaves) or int32 / float32: 96 or 128 bytes a texel instead of
+        # uint16 (at most 65,536 leaves) or int32 / float32: 96 or 128 bytes a texel instead of
         # 256 (6.8 M texels of photos: 0.9 GB; the exitance fit's sample of 2 M: 0.2 GB)
         self.index = np.empty((n, k), np.uint16 if len(leaves) <= 1 << 16 else np.int32)
         self.weight = np.empty((n, k), np.float32)

@@ -142,12 +142,9 @@ class TexelLight:
             return self._reader[1]
         if self.smooth_read:
             from ..radiosity.proxy import SmoothRead
-            tm = self.tm
-            points = bilinear_point(self.scene.corners[tm.patch], tm.u, tm.v)
-            faces = self.face_normals if self.face_normals is not None else \
-                self.scene.area_normal()[1]
-            normals = faces[tm.patch]
-            read = SmoothRead(sol.hierarchy, sol.leaves, points, normals)
+            patch = self.tm.patch
+            points = bilinear_point(self.scene.corners[patch], self.tm.u, self.tm.v)
+            read = SmoothRead(sol.hierarchy, sol.leaves, points, self._shading()[patch])
         else:
             stm = self.solution_texels
             interpolation = CornerInterpolation(sol.hierarchy, stm)
@@ -165,6 +162,11 @@ class TexelLight:
         self._reader = (key, read)
         return read
 
+    def _shading(self):
+        """(p, 3) the normal each face is lit by: its shading normal, else its own."""
+        return self.face_normals if self.face_normals is not None else \
+            self.scene.area_normal()[1]
+
     def _cast(self, luminance_only=False):
         """(U, O) as :meth:`direct` gives them; with ``luminance_only`` the luminance of O
         alone, (k, T) (the exitance fit's sample of a photo-resolution map: 24 instead of 96
@@ -174,6 +176,7 @@ class TexelLight:
         U = None if luminance_only else np.zeros((T, k, 3))
         O = np.zeros((k, T)) if luminance_only else np.zeros((T, k, 3))
         patch, u, v = tm.patch, tm.u, tm.v
+        shading = self._shading()
         parts = [im for im in tm.images if len(im)]
         centre = np.concatenate([im.uv for im in parts]) if parts else np.zeros((0, 2))
         size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
@@ -182,12 +185,10 @@ class TexelLight:
         def chunk(c0):
             # chunks start at multiples of TEXEL_CHUNK of the whole map, whatever block this is
             sl = slice(c0, min(T, c0 + TEXEL_CHUNK - (first + c0) % TEXEL_CHUNK))
-            pts, nrm, n_sub = footprint_points(scene, patch[sl], u[sl], v[sl], centre[sl],
-                                               size[sl], self.samples)
+            pts, n_sub = footprint_points(scene, patch[sl], u[sl], v[sl], centre[sl], size[sl],
+                                          self.samples)
             # the mean over each texel's footprint (a photo texel integrates it too)
-            if self.face_normals is not None:
-                nrm = np.repeat(self.face_normals[patch[sl]], n_sub, axis=0)
-            un, occ = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), nrm[::n_sub],
+            un, occ = lamp_irradiance(scene, pts.reshape(-1, n_sub, 3), shading[patch[sl]],
                                       self.occluder, self.rays, self.seed + 11 + first + c0,
                                       offset=self.offset)
             if luminance_only:
@@ -215,14 +216,13 @@ def leaf_indirect(sol, unoccluded=True):
 
 
 def footprint_points(scene, patch, u, v, centre, size, samples):
-    """3D points (t * samples^2, 3) and normals over each texel's footprint (a samples x
-    samples grid in UV around the texel centre ``centre`` (t, 2) of an image of ``size`` (t, 2)
-    texels, mapped through the owning patch; points past the patch edge are clamped onto it).
+    """3D points (t * samples^2, 3) over each texel's footprint (a samples x samples grid in
+    UV around the texel centre ``centre`` (t, 2) of an image of ``size`` (t, 2) texels, mapped
+    through the owning patch; points past the patch edge are clamped onto it), and samples^2.
     ``u``, ``v``: the patch parameters of the texel centres."""
-    normals = scene.area_normal()[1][patch]
     if samples <= 1 or len(patch) == 0:
         pts = bilinear_point(scene.corners[patch][:, None], u[:, None], v[:, None])[:, 0]
-        return pts, normals, 1
+        return pts, 1
     uvc = scene.uv[patch]
     g = (np.arange(samples) + 0.5) / samples - 0.5
     off = np.stack(np.meshgrid(g, g, indexing="xy"), -1).reshape(-1, 2)        # (s^2, 2)
@@ -238,4 +238,4 @@ def footprint_points(scene, patch, u, v, centre, size, samples):
     uu = np.clip(np.nan_to_num(uu, nan=0.5), 0.0, 1.0)
     vv = np.clip(np.nan_to_num(vv, nan=0.5), 0.0, 1.0)
     pts = bilinear_point(scene.corners[patch][rep][:, None], uu[:, None], vv[:, None])[:, 0]
-    return pts, normals[rep], len(off)
+    return pts, len(off)
