@@ -15,7 +15,7 @@ scans read as one group, as a real scan (one object, one material) is.
     python benchmarks/bench_scan.py                       # everything (~45 min)
     python benchmarks/bench_scan.py --quick               # the memory / time scaling only
     python benchmarks/bench_scan.py --one-group-only      # the one-group scans (~3 min)
-    python benchmarks/bench_scan.py --photos-only         # photo-resolution textures (~16 min)
+    python benchmarks/bench_scan.py --photos-only         # photo-resolution textures (~13 min)
 
 Writes benchmarks/results/scan.md, scan_raw.json and scan.png.
 """
