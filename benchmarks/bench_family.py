@@ -12,6 +12,14 @@ and to "unknown" (every lamp at its type's base power) to measure the exitance r
     python benchmarks/bench_family.py                       # every baked room, all presets
     python benchmarks/bench_family.py --rooms 16 17 --presets medium
     python benchmarks/bench_family.py --report              # tables and plot from the raw JSON
+    python benchmarks/bench_family.py --seeds 0-4           # exact powers, every preset, per seed
+    python benchmarks/bench_family.py --seeds 0-4 --rooms 0 1 --seeds-raw results/family_seeds_raw_a.json
+
+With ``--seeds`` each room is precomputed (exact powers, texel mode only) with the solver's,
+the orientation's and the texel rays' seed set to each of them; the figures go to
+results/family_seeds_raw*.json (one file per process, so that two can run side by side) and
+family.md reports their spread: the issue's "each preset more accurate than the one below, on
+every seed".
 
 Rooms 12-15 are held out from tuning (scenes.family.HELD_OUT): they are reported apart.
 """
@@ -31,6 +39,7 @@ sys.path.insert(0, ROOT)
 
 RESULTS = os.path.join(HERE, "results")
 RAW = os.path.join(RESULTS, "family_raw.json")
+SEEDS_RAW = os.path.join(RESULTS, "family_seeds_raw.json")
 PRESETS = ("draft", "medium", "high")
 
 
@@ -65,6 +74,30 @@ def run_room(index, presets, power_modes, log):
                 f"{sc['floor'][0]:.2f}, ratio err {sc['ratio_error']:.3f}, rho^ {est.rho_mean:.2f}, "
                 + ", ".join(f"{k}: {v['relit']['all'][0]:.2f}/{v['relit']['shadow'][0]:.2f}"
                             for k, v in sc["targets"].items() if k.endswith("off")))
+    return out
+
+
+def run_room_seeds(index, presets, seeds, log):
+    """The room at exact powers, every preset, with each seed (texel mode only: no baseline)."""
+    import bpy  # noqa: F401, PLC0415
+
+    from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free
+    from scenes import family_eval as fe
+    out = {}
+    room = fe.photographed_room(index, "exact")
+    for preset in presets:
+        for seed in seeds:
+            t0 = time.perf_counter()
+            res = shadow_free(room.data, ShadowFreeOptions(preset=preset, seed=seed))
+            seconds = time.perf_counter() - t0
+            sc = fe.score(room, res, None)
+            sc.update(seconds=seconds, preset=preset, seed=seed,
+                      lamps=[lp.name for lp in room.spec.lamps],
+                      rho_mean=float(res.lamps.rho_mean), links=int(res.stats["links"]))
+            out[f"exact/{preset}/seed{seed}"] = sc
+            f = room_figures(sc)["relit"]
+            log(f"room {index} {preset} seed {seed}: {seconds:.1f} s, "
+                f"{f['all']:.2f} / {f['shadow']:.2f}, rho^ {sc['rho_mean']:.3f}")
     return out
 
 
@@ -213,6 +246,7 @@ def write_report(raw, path_md, path_png):
     lines += ["Presets per room: a preset worse than the one below it by more than 0.05 on a "
               "room's lamp-off mean, overall or in the former shadows: "
               + ("; ".join(worse) if worse else "none") + ".", ""]
+    lines += _seed_spread(_seeded())
     lines += ["## Lamp exitance ratios (medium)", "",
               "Largest relative error of a lamp's exitance against the others' (its factor x the "
               "power it was set to, against its true power), with the lights' powers exact, 30 % "
@@ -239,6 +273,97 @@ def write_report(raw, path_md, path_png):
     with open(path_md, "w") as f:
         f.write("\n".join(lines))
     _plot(raw, path_png)
+
+
+def _seeded():
+    """The per-seed runs of every results/family_seeds_raw*.json, merged by room."""
+    import glob
+    seeded = {}
+    for path in sorted(glob.glob(os.path.join(RESULTS, "family_seeds_raw*.json"))):
+        for room, runs in json.load(open(path)).items():
+            seeded.setdefault(room, {}).update(runs)
+    return seeded
+
+
+def _seed_spread(seeded):
+    """Family.md's section on the seeds: per preset and seed, the rooms' mean and worst lamp-off
+    error, their spread over the seeds, and where a preset is not more accurate than the one
+    below it (on a seed's mean or worst over the rooms, or a room by more than 0.05)."""
+    from scenes import family as fam
+    if not seeded:
+        return []
+    rooms = sorted(seeded, key=int)
+    seeds = sorted({int(k.rsplit("seed", 1)[1]) for r in rooms for k in seeded[r]})
+    presets = [p for p in PRESETS if any(f"exact/{p}/seed{s}" in seeded[r]
+                                         for r in rooms for s in seeds)]
+    # per preset, seed: {room: (all, shadow)} over the rooms with lamp-off targets
+    fig = {}
+    for p in presets:
+        for s in seeds:
+            per = {}
+            for r in rooms:
+                sc = seeded[r].get(f"exact/{p}/seed{s}")
+                if sc is None or len(sc["lamps"]) < 2:
+                    continue
+                f = room_figures(sc)["relit"]
+                per[r] = (f["all"], f["shadow"])
+            fig[p, s] = per
+    common = sorted(set.intersection(*(set(v) for v in fig.values())), key=int)
+    held = [r for r in common if int(r) in fam.HELD_OUT]
+
+    def stats(p, s, sel):
+        a = np.array([fig[p, s][r][0] for r in sel])
+        b = np.array([fig[p, s][r][1] for r in sel])
+        return a.mean(), a.max(), np.nanmean(b), np.nanmax(b)
+
+    def span(values, nd=2):
+        return f"{min(values):.{nd}f} - {max(values):.{nd}f}"
+
+    lines = [f"## Spread over the seed (seeds {seeds[0]}-{seeds[-1]}, exact powers)", "",
+             "Each room precomputed (texel mode) with the seed of the orientation, the solver and "
+             "the texel rays set to each seed (`--seeds`; results/family_seeds_raw*.json), over "
+             f"the {len(common)} rooms with lamp-off targets ({len(held)} held out).  Lamp-off "
+             "CIEDE2000 as above: the rooms' mean (worst room), overall / in the former "
+             "shadows; min - max over the seeds.  The times are wall times of runs made two "
+             "or three side by side on the 2 cores (about twice a lone run's).", "",
+             "| preset | all rooms: mean | worst room | shadows: mean | worst room | held-out "
+             "rooms: mean | shadows: mean | time per room s |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for p in presets:
+        st = [stats(p, s, common) for s in seeds]
+        hs = [stats(p, s, held) for s in seeds] if held else None
+        t = [np.mean([seeded[r][f"exact/{p}/seed{s}"]["seconds"] for r in common])
+             for s in seeds]
+        lines.append(f"| {p} | {span([x[0] for x in st])} | {span([x[1] for x in st])} | "
+                     f"{span([x[2] for x in st])} | {span([x[3] for x in st])} | "
+                     + (f"{span([x[0] for x in hs])} | {span([x[2] for x in hs])} | "
+                        if hs else "- | - | ")
+                     + f"{span(t, 1)} |")
+    # the issue's promise: each preset more accurate than the one below, on every seed
+    broken, rooms_worse, spread = [], [], []
+    names = ("mean", "worst room", "shadows' mean", "shadows' worst room")
+    for lo, hi in zip(presets, presets[1:]):
+        for s in seeds:
+            a, b = stats(lo, s, common), stats(hi, s, common)
+            broken += [f"{hi} vs {lo}, seed {s}, {n}: {y:.2f} vs {x:.2f}"
+                       for n, x, y in zip(names, a, b) if y > x]
+            for r in common:
+                for part, x, y in zip(("all", "shadow"), fig[lo, s][r], fig[hi, s][r]):
+                    if np.isfinite(x) and np.isfinite(y) and y > x + 0.05:
+                        rooms_worse.append(f"room {r} {hi} vs {lo} seed {s} ({part}): "
+                                           f"{y:.2f} vs {x:.2f}")
+    for p in presets:
+        for r in common:
+            v = [fig[p, s][r][0] for s in seeds]
+            spread.append((max(v) - min(v), p, r))
+    spread.sort(reverse=True)
+    lines += ["", "A preset less accurate than the one below it on a seed's figure over the "
+              "rooms: " + ("; ".join(broken) if broken else "none") + ".  A room more than "
+              "0.05 worse than at the preset below, on a seed: "
+              + ("; ".join(rooms_worse) if rooms_worse else "none") + ".  Largest spread of a "
+              "room's overall error over the seeds: "
+              + ", ".join(f"room {r} {p} {d:.2f}" for d, p, r in spread[:3]) + ".", ""]
+    return lines
 
 
 def _plot(raw, path):
@@ -286,9 +411,26 @@ def main(argv=None):
     ap.add_argument("--presets", default=",".join(PRESETS))
     ap.add_argument("--powers", default="exact,off30,unknown")
     ap.add_argument("--report", action="store_true")
+    ap.add_argument("--seeds", help="e.g. 0-4: exact powers, every preset, per seed")
+    ap.add_argument("--seeds-raw", default=SEEDS_RAW)
     args = ap.parse_args(argv)
     raw = json.load(open(RAW)) if os.path.exists(RAW) else {}
-    if not args.report:
+    if args.seeds and not args.report:
+        from scenes import family as fam
+        from scenes.addon import register_repo_addon
+        register_repo_addon()
+        a, _, b = args.seeds.partition("-")
+        seeds = list(range(int(a), int(b or a) + 1))
+        path = os.path.join(ROOT, "benchmarks", args.seeds_raw) \
+            if not os.path.isabs(args.seeds_raw) else args.seeds_raw
+        seeded = json.load(open(path)) if os.path.exists(path) else {}
+        for r in (args.rooms if args.rooms else fam.baked_rooms()):
+            got = run_room_seeds(r, args.presets.split(","), seeds,
+                                 lambda s: print(s, flush=True))
+            seeded.setdefault(str(r), {}).update(_json_safe(got))
+            with open(path, "w") as f:
+                json.dump(seeded, f, indent=1)
+    elif not args.report:
         from scenes import family as fam
         from scenes.addon import register_repo_addon
         register_repo_addon()
