@@ -51,7 +51,10 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
   every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
   ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
-  (measured on the office, 2 lamps, draft: 420-600 bytes a texel up to 1.17 M texels); past
+  (measured on 100k-face scans at medium with their photos upscaled, where the texels' light
+  is the peak: 296 bytes a texel at 1 lamp (3.6 M texels), 410-430 at 2 (1.7 M), 647 at 4
+  (1.0 M), over the ray chunk and the solve held; fitted 10 % above: 200 + 130 a lamp.  The
+  office's 1.17 M texels at 2 lamps, draft, need less: 390 bytes a texel); past
   it (photo resolution: the light cast and the maps written block by block, the exitance fit
   on a sample) ``STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps`` over
   ``STREAM_BYTES`` (the fit's sample and a block): the photos read, the texel map, the
@@ -79,7 +82,7 @@ SOLVE_BYTES = {"draft": (298 * 2**20, 0, 73 * 2**10, 360 * 2**10),
                "high": (336 * 2**20, 37 * 2**10, 253 * 2**10, 0),
                "ultra": (568 * 2**20, 36 * 2**10, 0, 0)}
 TEXEL_BYTES = 200
-TEXEL_LAMP_BYTES = 250
+TEXEL_LAMP_BYTES = 130
 RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.TEXEL_CHUNK)
 STREAM_BYTES = 280 * 2**20
 STREAM_TEXEL_BYTES = 60
