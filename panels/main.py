@@ -52,13 +52,16 @@ def status_lines(scene):
         ratio = st.get("photo_ratio", [-1] * n)[j]
         sigma = st.get("photo_sigma", [-1] * n)[j]
         used = st.get("photo_used", [False] * n)[j]
+        weight = st.get("photo_weight", [1.0] * n)[j] if used else 0.0
         if n == 1:
             view = "set power used (one lamp: the photo fixes only the overall level)"
         elif ratio <= 0 or sigma < 0 or not math.isfinite(sigma):
             view = "set power used (the photo cannot tell)"
         else:
+            taken = ("set power used" if not used else "photo used" if weight >= 1.0 else
+                     "photo used in part")
             view = (f"photo says {ratio:.2f}x +- {100 * sigma:.0f} % of its set power, relative "
-                    f"to the other lamps; {'photo used' if used else 'set power used'}")
+                    f"to the other lamps; {taken}")
         lines.append((f"{name}: {view}{now}", 'LIGHT_AREA'))
     return lines
 
