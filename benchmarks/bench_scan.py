@@ -16,6 +16,12 @@ scans read as one group, as a real scan (one object, one material) is.
     python benchmarks/bench_scan.py --quick               # the memory / time scaling only
     python benchmarks/bench_scan.py --one-group-only      # the one-group scans (~3 min)
     python benchmarks/bench_scan.py --photos-only         # photo-resolution textures (~13 min)
+    python benchmarks/bench_scan.py --seeds 0-4 [--rooms 0 16] [--seeds-raw results/scan_seeds_raw_a.json]
+
+``--seeds`` precomputes the 100k-face scans at every preset with the solver's, the
+orientation's and the texel rays' seed set to each (the scan's mesh stays the same); the
+records go to results/scan_seeds_raw*.json (one file per process, so that two can run side by
+side) and scan.md reports their spread.
 
 Writes benchmarks/results/scan.md, scan_raw.json and scan.png.
 """
@@ -40,7 +46,7 @@ PROXY_CURVE = (500, 1000, 1500, 3000, 6000)
 PHOTO_UPSCALES = (4, 8, 12)     # room 0's photos x 4, 8, 12 a side: 1.7 M, 6.8 M, 15.3 M texels
 
 
-def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1):
+def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1, seed=0):
     import resource
 
     import numpy as np
@@ -71,7 +77,7 @@ def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1):
     estimate = estimate_precompute_memory(r.data, preset) / 2**20
     without_proxy = estimate_precompute_memory(r.data, preset, proxy=False) / 2**20
     t0 = time.perf_counter()
-    res = shadow_free(r.data, ShadowFreeOptions(preset=preset))
+    res = shadow_free(r.data, ShadowFreeOptions(preset=preset, seed=seed))
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if photo_up > 1:
@@ -92,7 +98,7 @@ def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1):
     st = res.stats
     proxy = res.solution.context.get("proxy")
     print(json.dumps({
-        "room": room, "faces": int(r.data.n_patches), "preset": preset,
+        "room": room, "faces": int(r.data.n_patches), "preset": preset, "seed": seed,
         "proxy_setting": proxy_faces, "one_group": bool(one_group), "read_s": read_s,
         "seconds": seconds,
         "rss_read_mb": rss_read, "peak_mb": peak, "estimate_mb": estimate,
@@ -107,9 +113,9 @@ def child(room, faces, preset, proxy_faces, one_group=False, photo_up=1):
         "applied": [bool(x) for x in res.lamps.applied]}))
 
 
-def run(room, faces, preset, proxy_faces=0, one_group=False, photo_up=1, timeout=1800):
+def run(room, faces, preset, proxy_faces=0, one_group=False, photo_up=1, timeout=1800, seed=0):
     cmd = [sys.executable, __file__, "--child", str(room), str(faces), preset, str(proxy_faces),
-           str(int(one_group)), str(photo_up)]
+           str(int(one_group)), str(photo_up), str(seed)]
     t0 = time.perf_counter()
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -121,7 +127,7 @@ def run(room, faces, preset, proxy_faces=0, one_group=False, photo_up=1, timeout
                 "stderr": out.stderr[-2000:], "seconds": time.perf_counter() - t0}
     rec = json.loads(lines[-1])
     rec["status"] = "ok"
-    print(f"{time.strftime('%H:%M:%S')} room {room} {faces} faces {preset} "
+    print(f"{time.strftime('%H:%M:%S')} room {room} {faces} faces {preset} seed {seed} "
           f"(proxy {proxy_faces or 'preset'}): {rec['seconds']:.1f} s, peak {rec['peak_mb']:.0f} "
           f"MB, lamp off {rec.get('relit_all', float('nan')):.2f} / "
           f"{rec.get('relit_shadow', float('nan')):.2f}", flush=True)
@@ -268,6 +274,7 @@ def write(records, path_md, path_png):
                          f"{r['links']:,} | {r['seconds']:.1f} | {r['peak_mb']:.0f} | "
                          f"{_f(r['relit_all'])} / {_f(r['relit_shadow'])} |")
         lines.append("")
+    lines += _seed_spread()
     bad = [r for r in records if r.get("status") != "ok"]
     if bad:
         lines += ["Failed or timed out: " + ", ".join(
@@ -309,6 +316,63 @@ def write(records, path_md, path_png):
     fig.savefig(path_png, dpi=80)
 
 
+def _seed_spread():
+    """scan.md's section on the seeds (results/scan_seeds_raw*.json): per preset, the rooms'
+    mean and worst lamp-off error over the seeds, and where a preset is not more accurate than
+    the one below it on a seed."""
+    import glob
+
+    import numpy as np
+    recs = [r for path in sorted(glob.glob(str(RESULTS / "scan_seeds_raw*.json")))
+            for r in json.loads(Path(path).read_text()) if r.get("status") == "ok"]
+    if not recs:
+        return []
+    seeds = sorted({r["seed"] for r in recs})
+    by = {(r["preset"], r["seed"], r["room"]): r for r in recs}
+    presets = [p for p in PRESETS if any(r["preset"] == p for r in recs)]
+    # the rooms run at every preset with every seed
+    rooms = sorted(m for m in {r["room"] for r in recs}
+                   if all((p, s, m) in by for p in presets for s in seeds))
+    if not rooms:
+        return []
+
+    def fig(p, s, part):
+        v = [by[p, s, m][part] for m in rooms]
+        return float(np.nanmean(v)), float(np.nanmax(v))
+
+    def span(v, nd=2):
+        return f"{min(v):.{nd}f} - {max(v):.{nd}f}"
+    lines = [f"## Spread over the seed (seeds {seeds[0]}-{seeds[-1]}, scans of ~100k faces)", "",
+             f"Rooms {', '.join(map(str, rooms))} as scans, each precomputed with the seed of the "
+             "orientation, the solver and the texel rays set to each seed (`--seeds`; the mesh "
+             "is the same).  Lamp off, mean CIEDE2000 as above: the rooms' mean and worst, "
+             "min - max over the seeds.  Times: wall times with another benchmark running "
+             "beside (about 1.5-2x a lone run's).", "",
+             "| preset | all: mean | worst room | shadows: mean | worst room | time s | "
+             "lamps taking the photo's ratio over the set power, in full or in part (runs) |",
+             "|---|---:|---:|---:|---:|---:|---|"]
+    for p in presets:
+        a = [fig(p, s, "relit_all") for s in seeds]
+        b = [fig(p, s, "relit_shadow") for s in seeds]
+        t = [np.mean([by[p, s, m]["seconds"] for m in rooms]) for s in seeds]
+        over = [f"room {m} seed {s}" for s in seeds for m in rooms
+                if any(by[p, s, m]["applied"])]
+        lines.append(f"| {p} | {span([x[0] for x in a])} | {span([x[1] for x in a])} | "
+                     f"{span([x[0] for x in b])} | {span([x[1] for x in b])} | {span(t, 0)} | "
+                     f"{', '.join(over) or 'none'} |")
+    worse = []
+    for lo, hi in zip(presets, presets[1:]):
+        for s in seeds:
+            for part, name in (("relit_all", "all"), ("relit_shadow", "shadows")):
+                for k, what in ((0, "mean"), (1, "worst")):
+                    x, y = fig(lo, s, part)[k], fig(hi, s, part)[k]
+                    if y > x + 0.005:
+                        worse.append(f"{hi} vs {lo} seed {s} {name} {what} {y:.2f} vs {x:.2f}")
+    lines += ["", "A preset less accurate than the one below it on a seed's figure (by more "
+              "than 0.005): " + ("; ".join(worse) if worse else "none") + ".", ""]
+    return lines
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--child", nargs="+")
@@ -320,11 +384,30 @@ def main(argv=None):
     ap.add_argument("--rooms", nargs="*", type=int, default=list(ROOMS))
     ap.add_argument("--presets", nargs="*", default=list(PRESETS))
     ap.add_argument("--faces", type=int, default=100_000)
+    ap.add_argument("--seeds", help="e.g. 0-4: the scans at every preset, per seed")
+    ap.add_argument("--seeds-raw", default="results/scan_seeds_raw.json")
+    ap.add_argument("--report", action="store_true", help="scan.md from the raw JSON only")
     args = ap.parse_args(argv)
     if args.child:
         room, faces, preset, pf = args.child[:4]
         child(int(room), int(faces), preset, int(pf), len(args.child) > 4 and args.child[4] == "1",
-              int(args.child[5]) if len(args.child) > 5 else 1)
+              int(args.child[5]) if len(args.child) > 5 else 1,
+              int(args.child[6]) if len(args.child) > 6 else 0)
+        return
+    if args.seeds:
+        a, _, b = args.seeds.partition("-")
+        path = Path(args.seeds_raw)
+        path = path if path.is_absolute() else ROOT / "benchmarks" / path
+        seeded = json.loads(path.read_text()) if path.exists() else []
+        for room in args.rooms:
+            for preset in args.presets:
+                for seed in range(int(a), int(b or a) + 1):
+                    seeded.append(run(room, args.faces, preset, seed=seed))
+                    path.write_text(json.dumps(seeded, indent=1))
+        args.report = True
+    if args.report:
+        records = json.loads((RESULTS / "scan_raw.json").read_text())
+        write(records, RESULTS / "scan.md", RESULTS / "scan.png")
         return
     if args.photos_only or args.one_group_only:
         # those cases run again, in place of theirs in the existing results
