@@ -43,9 +43,9 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   100k-face scan at medium, its bakes upscaled) the peaks were 1,204, 1,362 and 1,794 MB
   (+ BASE_BYTES), the texel work's (the exitance fit's sample, the maps), placing the texels
   957 MB at 15 M, 300 of it the mesh phase's own (~48 bytes a texel): the texel work by the
-  shadow-free textures' model below gives 1.00x, 0.88x and 1.10x of them (1.33x at 1.7 M
-  before the kept texels' lamp bytes were refitted; images of up to PHOTO_TEXELS hold float64
-  texel parameters, as 6.6 M's do).  The same case varies by
+  shadow-free textures' model below gives 0.99x, 0.87x and 1.09x of them (a rerun: 1,218,
+  1,368, 1,805 MB; 1.33x at 1.7 M before the kept texels' lamp bytes were refitted; images of
+  up to PHOTO_TEXELS hold float64 texel parameters, as 6.6 M's do).  The same case varies by
   +-14 % from run to run (room 20's scan at medium: 514 and 606 MB), so the lines sit ~10 %
   above the runs' mean rather than above the largest: within 25 % of every run (the issue's
   target), below the largest by up to 8 %.
