@@ -76,3 +76,9 @@ def test_lamps_off_in_the_photo_are_left_alone():
     f = photo_factors(t, np.array([1.0, 0.0, 0.0]), on)
     assert f[1] == 1.0 and np.isfinite(f).all()
     assert f[0] / f[2] == pytest.approx(0.8 / 1.25)
+    # a lamp the fit cannot tell (no ratio, or none of the light) neither moves nor moves others
+    for bad in (np.nan, 0.0):
+        t = np.array([0.8, bad, 1.25])
+        f = photo_factors(t, np.array([1.0, 0.0, 0.0]), np.ones(3, bool))
+        assert np.isfinite(f).all() and f[1] == 1.0
+        assert f[0] / f[2] == pytest.approx(0.8 / 1.25)

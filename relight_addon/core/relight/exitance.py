@@ -188,10 +188,13 @@ def photo_factors(ratio, weight, on):
     the lamps on, each weighted by how much of the user's ratio it keeps.  With weights 0 and
     1 that is the kept lamps' mean; a lamp of weight w beside one kept lamp takes
     (t / t_kept) ** (w / (2 - w)) of the photo's ratio between them: continuous in w."""
-    log_t = np.log(np.where(on, ratio, 1.0))
-    keep = np.where(on, 1.0 - weight, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_t = np.log(np.where(on, ratio, 1.0))
+    told = on & np.isfinite(log_t)          # (a lamp the fit cannot tell counts for nothing)
+    log_t = np.where(told, log_t, 0.0)
+    keep = np.where(told, 1.0 - weight, 0.0)
     base = float(keep @ log_t / keep.sum()) if keep.sum() > 0 else 0.0
-    return np.exp(np.where(on, weight, 0.0) * (log_t - base))
+    return np.exp(np.where(told, weight, 0.0) * (log_t - base))
 
 
 def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
