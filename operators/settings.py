@@ -193,8 +193,7 @@ def store_status(scene, result, seconds, correction, run, warnings, fingerprint=
         "photo_ratio": [finite(x, -1.0) for x in est.photo_ratio],
         "photo_sigma": [finite(x, -1.0) for x in est.uncertainty],
         "photo_used": [bool(x) for x in est.applied],
-        "photo_weight": [float(x) for x in (est.applied if est.photo_weight is None
-                                             else est.photo_weight)],
+        "photo_weight": [float(x) for x in est.photo_weight],
         "rho_mean": finite(est.rho_mean, -1.0),
         "rho_sigma": finite(getattr(est, "rho_sigma", float("inf")), -1.0),
         # a dense mesh solved on a decimated proxy: its faces and how far the mesh is from it

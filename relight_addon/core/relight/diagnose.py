@@ -127,8 +127,8 @@ def diagnose(result, use_patch, group_names=str) -> list:
         if r > OFF_FACTOR and s < 0.5 * np.log(OFF_FACTOR) or \
                 (len(seen) > 2 and r < 1 / OFF_FACTOR and s < 0.5 * np.log(OFF_FACTOR)):
             versus = f"'{names[seen[1 - j]]}'" if len(seen) == 2 else "the other lamps"
-            w = 1.0 if est.photo_weight is None else float(est.photo_weight[k])
-            used = ("the set power is kept" if not est.applied[k] else
+            w = float(est.photo_weight[k])
+            used = ("the set power is kept" if w <= 0 else
                     "the photo's estimate is used" if w >= 1.0 else
                     "the photo's estimate is used in part (it is near the edge of its "
                     "uncertainty)")

@@ -64,13 +64,13 @@ class LampEstimate:
     lamp on in the photo (geometric mean 1 over them; 1 for a single lamp, nan for lamps off
     in the photo), i.e. the photo's view of each lamp against the user's power;
     uncertainty (k,): its 1-sigma relative uncertainty (jackknife over the photographed
-    surfaces; inf when it cannot be told); applied (k,): whether the photo's ratio was used,
-    photo_weight (k,): how much of it (1: in full; photo_weights, photo_factors).
+    surfaces; inf when it cannot be told); photo_weight (k,): how much of the photo's ratio
+    was used (0: none, 1: in full; photo_weights, photo_factors), ``applied`` whether any.
     equal (k,), nnls (k,): eq 4.2 and NNLS factors, reported."""
     scale: np.ndarray
     photo_ratio: np.ndarray
     uncertainty: np.ndarray
-    applied: np.ndarray
+    photo_weight: np.ndarray
     equal: np.ndarray
     nnls: np.ndarray
     method: str
@@ -78,7 +78,10 @@ class LampEstimate:
     # rho^'s relative 1-sigma uncertainty (the vote's bootstrap); inf where the photo's shadows
     # do not tell it (fewer than VOTE_MIN_PIECES pieces vote) and rho^ stays the first guess
     rho_sigma: float = float("inf")
-    photo_weight: np.ndarray = None
+
+    @property
+    def applied(self) -> np.ndarray:
+        return self.photo_weight > 0
 
 
 # The photo's ratio replaces the user's (mode "user") only when it is pinned down: its
@@ -143,7 +146,6 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
 
     ratio = np.where(on, 1.0, np.nan)
     sigma = np.where(on, 0.0 if on.sum() == 1 else np.inf, np.nan)
-    applied = np.zeros(k, bool)
     weight = np.zeros(k)                   # how much of the photo's ratio each lamp takes
     rho_mean, rho_sigma = opt.rho_mean, np.inf
     if opt.exitance == "nnls" and np.any(nnls_k > 0):
@@ -165,10 +167,9 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
             ratio[on], sigma[on] = fit.t, sig
             weight[on] = 1.0 if opt.exitance == "photo" else photo_weights(fit.t, sig)
             if np.any(weight > 0):
-                applied = weight > 0
                 scale = rounds(scale * photo_factors(ratio, weight, on), rho_mean)
-    return LampEstimate(scale, ratio, sigma, applied, eq_k, nnls_k, opt.exitance, rho_mean,
-                        rho_sigma, weight)
+    return LampEstimate(scale, ratio, sigma, weight, eq_k, nnls_k, opt.exitance, rho_mean,
+                        rho_sigma)
 
 
 def photo_weights(t, sigma):

@@ -104,9 +104,7 @@ def add_lamps(result, lights: Lights, names, seed=0):
         est, scale=np.concatenate([est.scale, np.full(m, s)]),
         photo_ratio=np.concatenate([est.photo_ratio, np.full(m, np.nan)]),
         uncertainty=np.concatenate([est.uncertainty, np.full(m, np.nan)]),
-        applied=np.concatenate([est.applied, np.zeros(m, bool)]),
-        photo_weight=None if est.photo_weight is None
-        else np.concatenate([est.photo_weight, np.zeros(m)]),
+        photo_weight=np.concatenate([est.photo_weight, np.zeros(m)]),
         equal=np.concatenate([est.equal, np.ones(m)]), nnls=np.concatenate([est.nnls, np.zeros(m)]))
     return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol, direct=direct,
                                room=None)
@@ -128,8 +126,7 @@ def keep_lamps(result, drop):
         new_sol.light_occ, new_sol.light_unocc = sol.light_occ[keep], sol.light_unocc[keep]
     est = result.lamps
     lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
-        "scale", "photo_ratio", "uncertainty", "applied", "equal", "nnls", "photo_weight")
-        if getattr(est, f) is not None})
+        "scale", "photo_ratio", "uncertainty", "photo_weight", "equal", "nnls")})
     direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
                                lamps=lamps, solution=new_sol, direct=direct, room=None)
