@@ -323,15 +323,21 @@ def _sample_weight(lights, i, p, n, q):
 # -- the irradiance ----------------------------------------------------------------------------
 
 def light_irradiance(lights: Lights, points, normals, occluder=None, rays=16, seed=0,
-                     scene_size=1.0, offset=0.0):
+                     scene_size=1.0, offset=0.0, weights=None):
     """Direct irradiance (n, m, 3) from each of the m lights at unit factor: (unoccluded, with
     visibility).  ``points`` (n, 3), or (n, S, 3) for groups of S points whose mean is wanted
-    (a texel's footprint, a leaf's quadrature points), with ``normals`` (n, 3).  Ray end points
-    are lifted by ``offset`` along the receiver's normal; sun rays are 4 x ``scene_size`` long."""
+    (a texel's footprint, a leaf's quadrature points), with ``normals`` (n, 3); ``weights``
+    (n, S) the points' shares of their group's mean (area weights; None: equal).  Ray end
+    points are lifted by ``offset`` along the receiver's normal; sun rays are 4 x
+    ``scene_size`` long."""
     points = np.asarray(points, float)
     points = points.reshape(len(points), -1, 3) if points.ndim == 3 else points.reshape(-1, 1, 3)
     normals = np.asarray(normals, float).reshape(-1, 3)
     n_pts, S = points.shape[:2]
+    if weights is not None:
+        weights = np.asarray(weights, float).reshape(n_pts, S)
+        total = weights.sum(axis=1, keepdims=True)
+        weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), 1.0 / S)
     m = len(lights)
     unocc = np.zeros((n_pts, m, 3))
     occ = np.zeros((n_pts, m, 3))
@@ -342,13 +348,14 @@ def light_irradiance(lights: Lights, points, normals, occluder=None, rays=16, se
     flat_n = np.repeat(normals, S, axis=0)
     for i in range(m):
         base = _closed_form(lights, i, points.reshape(-1, 3), flat_n).reshape(n_pts, S)
-        base = base.mean(axis=1)
+        base = base.mean(axis=1) if weights is None else np.einsum("ns,ns->n", base, weights)
         live = np.flatnonzero(base > 0)
         unocc_f = np.zeros(n_pts)
         occ_f = np.zeros(n_pts)
         if len(live):
             u_fac, o_fac = _visible_factor(lights, i, points[live], normals[live], occluder,
-                                           rays, rng, far, offset)
+                                           rays, rng, far, offset,
+                                           None if weights is None else S * weights[live])
             unocc_f[live] = base[live] * u_fac
             occ_f[live] = base[live] * o_fac
         unocc[:, i] = unocc_f[:, None] * lights.intensity[i]
@@ -356,10 +363,10 @@ def light_irradiance(lights: Lights, points, normals, occluder=None, rays=16, se
     return unocc, occ
 
 
-def _visible_factor(lights, i, pts, nrm, occluder, rays, rng, far, offset):
+def _visible_factor(lights, i, pts, nrm, occluder, rays, rng, far, offset, point_weight=None):
     """(unoccluded factor, occluded factor) per point group on the closed form: the spot mask or
     spread profile averaged over the light's samples (1 for a point or sun), and that times the
-    visible fraction."""
+    visible fraction; each point's rays count ``point_weight`` (g, S) times (None: once)."""
     g, S = pts.shape[:2]
     kind = lights.kind[i]
     single = (kind in (POINT, SPOT) and lights.radius[i] <= 0) or \
@@ -382,6 +389,9 @@ def _visible_factor(lights, i, pts, nrm, occluder, rays, rng, far, offset):
             p, nn = pts[row, j % S], nrm[row]
             q = _samples(lights, i, p, j.astype(float), shift[row], far)
             wt, ref = _sample_weight(lights, i, p, nn, q)
+            if point_weight is not None:
+                pw = point_weight[row, j % S]
+                wt, ref = wt * pw, ref * pw
             blocked = (occluder.segments_occluded(p + offset * nn, q) if occluder is not None
                        else np.zeros(len(p), bool))
             for k, x in enumerate((wt, wt * ~blocked, ref)):

@@ -165,9 +165,11 @@ def lights_on_elements(scene: SceneData, h: Hierarchy, elements, occluder, m, ra
     if not len(scene.lights):
         return None, None
     k = scene.n_lamps
-    pts, _ = quadrature(h.corners[elements], m)
+    # area-weighted: a triangle is a quad with two corners at one point, whose Gauss points
+    # crowd towards that corner
+    pts, w = quadrature(h.corners[elements], m)
     U, O = light_irradiance(scene.lights, pts, h.normal[elements], occluder, rays, seed,
-                            scale, ray_offset(scale))
+                            scale, ray_offset(scale), weights=w)
     occ, unocc = np.zeros((k, len(elements), 3)), np.zeros((k, len(elements), 3))
     for i, lamp in enumerate(scene.lights.lamp):
         occ[lamp] += O[:, i]
