@@ -68,12 +68,14 @@ def _gauss_points(h, m):
     return quadrature(h.corners[:1], m)[0]
 
 
-def test_a_shadowed_part_of_a_triangle_counts_by_its_area():
+@pytest.mark.parametrize("angle_deg", [0.53, 0.0])
+def test_a_shadowed_part_of_a_triangle_counts_by_its_area(angle_deg):
     """Sun from straight above, a blocker over y > 0.7: the lit part is 0.91 of the triangle's
-    area (y < 0.7); its Gauss points crowd into the shadowed tip."""
+    area (y < 0.7); its Gauss points crowd into the shadowed tip.  A sun of angle 0 (one
+    direction, one sample) once cast one ray per leaf, from its first point: all lit or all dark."""
     m_sun = np.eye(4)
     m_sun[:3, 3] = (0.0, 0, 10.0)
-    sun = Lights.make(SUN, 0, m_sun, np.full(3, 1.0), angle=np.radians(0.53))
+    sun = Lights.make(SUN, 0, m_sun, np.full(3, 1.0), angle=np.radians(angle_deg))
     blocker = np.array([[[-1.0, 0.7, 0.5], [2.0, 0.7, 0.5], [2.0, 3.0, 0.5], [-1.0, 3.0, 0.5]]])
     occluder = make_occluder(np.concatenate([blocker[:, [0, 1, 2]], blocker[:, [0, 2, 3]]]))
     scene = _triangle_scene(sun)
@@ -102,3 +104,20 @@ def test_children_of_a_triangle_leaf_sum_to_its_light():
     want = light_irradiance(lights, pts, np.tile([0.0, 0, 1], (len(pts), 1)))[0][:, 0, 0].mean()
     assert e[0] == pytest.approx(want, rel=0.03)
     assert (area[1:] @ e[1:]) / area[0] == pytest.approx(want, rel=0.01)
+
+
+@pytest.mark.parametrize("radius", [0.0, 0.02])
+def test_a_point_light_shadow_edge_across_a_leaf_reads_its_lit_share(radius):
+    """A unit square leaf (a parallelogram: equal weights) 1 m under a point light, a blocker
+    edge at x = 0.5 between them: half the leaf is lit.  With radius 0 the light is one sample,
+    and its leaf once read the first Gauss point's visibility alone (0 here)."""
+    quad = np.array([[[0.0, 0, 0], [1.0, 0, 0], [1.0, 1, 0], [0.0, 1, 0]]])
+    lights = _point_light((0.5, 0.5, 1.0))
+    lights.radius[:] = radius
+    blocker = np.array([[[-2.0, -2, 0.5], [0.5, -2, 0.5], [0.5, 3, 0.5], [-2.0, 3, 0.5]]])
+    occluder = make_occluder(np.concatenate([blocker[:, [0, 1, 2]], blocker[:, [0, 2, 3]]]))
+    scene = _triangle_scene(lights, quad)
+    h = Hierarchy(scene)
+    occ, unocc = lights_on_elements(scene, h, np.array([0]), occluder, 2, 32, 0, 1.0)
+    # the x < 0.5 half's Gauss points are shadowed, the others lit: half the light by symmetry
+    assert occ[0, 0, 0] / unocc[0, 0, 0] == pytest.approx(0.5, abs=0.08)

@@ -374,7 +374,9 @@ def _visible_factor(lights, i, pts, nrm, occluder, rays, rng, far, offset, point
     needs_profile = kind in (SPOT, AREA)
     if occluder is None and not needs_profile:
         return np.ones(g), np.ones(g)
-    total = 1 if single else max(int(rays), FIRST_RAYS if occluder is None else 1)
+    # a light of one point: one ray from every point of the group (one ray in all let the
+    # group's first point decide a leaf's or a texel footprint's shadow alone)
+    total = S if single else max(int(rays), FIRST_RAYS if occluder is None else 1)
     shift = rng.random((g, 2))
     sums = np.zeros((3, g))                       # weight, weight x visible, reference
     n_free = np.zeros(g)
@@ -399,7 +401,7 @@ def _visible_factor(lights, i, pts, nrm, occluder, rays, rng, far, offset, point
             n_free[:] += np.bincount(row, (ref > 0) & ~blocked, g)
             n_blocked[:] += np.bincount(row, (ref > 0) & blocked, g)
 
-    first = min(total, FIRST_RAYS)
+    first = total if single else min(total, FIRST_RAYS)
     cast(np.arange(g), 0, first)
     more = np.arange(g) if occluder is None else np.flatnonzero((n_free > 0) & (n_blocked > 0))
     if total > first and len(more):
