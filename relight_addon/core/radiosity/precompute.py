@@ -159,9 +159,10 @@ def _lamp_emission(scene: SceneData, system: LeafSystem, light_occ=None) -> np.n
 
 
 def lights_on_elements(scene: SceneData, h: Hierarchy, elements, occluder, m, rays, seed,
-                       scale):
+                       scale, lift=0.0):
     """Direct irradiance (k, n, 3) per lamp from ``scene.lights`` averaged over the m x m
-    quadrature points of each element: (with visibility, unoccluded); None without lights."""
+    quadrature points of each element: (with visibility, unoccluded); None without lights.
+    Rays start ``lift`` above the usual offset (a proxy's leaves lit against the full mesh)."""
     if not len(scene.lights):
         return None, None
     k = scene.n_lamps
@@ -169,7 +170,7 @@ def lights_on_elements(scene: SceneData, h: Hierarchy, elements, occluder, m, ra
     # crowd towards that corner
     pts, w = quadrature(h.corners[elements], m)
     U, O = light_irradiance(scene.lights, pts, h.normal[elements], occluder, rays, seed,
-                            scale, ray_offset(scale), weights=w)
+                            scale, ray_offset(scale) + lift, weights=w)
     occ, unocc = np.zeros((k, len(elements), 3)), np.zeros((k, len(elements), 3))
     for i, lamp in enumerate(scene.lights.lamp):
         occ[lamp] += O[:, i]
@@ -348,12 +349,14 @@ def _spread_over_leaves(h: Hierarchy, system: LeafSystem, b_leaf):
 
 
 def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=None, seed=0,
-                    progress=None) -> RadiositySolution:
+                    progress=None, light_occluder=None, light_lift=0.0) -> RadiositySolution:
     """Refine links with the BF/BFV oracle, compute accurate F and V, solve one basis per lamp.
 
     occluder: "auto" (Embree, else mathutils), None (no visibility: convex scenes, tests), or an
     object with ``segments_occluded(origins, ends)``.  progress(fraction, message) may raise
-    Cancelled (or return False) to stop.
+    Cancelled (or return False) to stop.  ``light_occluder``: what the leaves' light from
+    ``scene.lights`` is cast against instead (a proxy's full mesh), from ``light_lift`` above
+    them.
     """
     q = get_preset(quality)
     scene.validate_for_solve()
@@ -512,16 +515,20 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
-        light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, occluder,
+        lamp_occluder = occluder if light_occluder is None else _CountingOccluder(light_occluder)
+        light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, lamp_occluder,
                                                     q.quadrature, q.rays,
-                                                    int(rng.integers(2**31)), scale)
+                                                    int(rng.integers(2**31)), scale, light_lift)
     report(0.9, "Solving per-lamp radiosity")
     with timer("solve"):
         E = _lamp_emission(scene, system, light_occ)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
-    counts = {"rays": occluder.rays if occluder is not None else 0, "cluster_links": len(cX)}
-    context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV)}
+    rays = sum(o.rays for o in {id(occluder): occluder, id(lamp_occluder): lamp_occluder}.values()
+               if o is not None)
+    counts = {"rays": rays, "cluster_links": len(cX)}
+    context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV),
+               "light_occluder": lamp_occluder, "light_lift": light_lift}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
                              light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
                              counts, context)
@@ -550,8 +557,9 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
             solution.scene, q)
     solution.system = system
     solution.light_occ, solution.light_unocc = lights_on_elements(
-        solution.scene, h, system.leaves, ctx.get("occluder"), q.quadrature, q.rays,
-        int(rng.integers(2**31)), ctx.get("scale", 1.0))
+        solution.scene, h, system.leaves, ctx.get("light_occluder", ctx.get("occluder")),
+        q.quadrature, q.rays, int(rng.integers(2**31)), ctx.get("scale", 1.0),
+        ctx.get("light_lift", 0.0))
     solve_basis(solution, rho_leaf, emission_scale)
     return solution
 

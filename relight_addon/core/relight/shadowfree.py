@@ -238,10 +238,12 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         # surface.  With them, family room 5's 100k-triangle scan at medium pinned a lamp 15 %
         # off at exact powers (lamp off 0.51 / 0.55 -> 0.75 / 0.63 CIEDE2000).
         quality = get_preset(opt.preset)
+        lamp_view = {}
         if proxy is not None:
             quality = quality.with_(contact_levels=0)
+            lamp_view = _proxy_lamp_view(proxy, occluder)
         sol = solve_radiosity(scene1, quality, occluder=rad_occluder, seed=opt.seed,
-                              progress=stage.sub(0.05, 0.4))
+                              progress=stage.sub(0.05, 0.4), **lamp_view)
         sol.context["proxy"] = proxy
     stage(0.4, "Lamp exitances and reflectances")
     lamps = fit_lamps(sol, rad_tm, photo, use_patch, est, opt, texel_light)
@@ -349,6 +351,20 @@ def _texel_light(scene, tm, occluder, opt, seed, proxy, solution_texels):
                       face_normals=None if proxy is None else proxy.normals,
                       smooth_read=proxy is not None,
                       offset=0.0 if proxy is None else BUMPS * proxy.roughness)
+
+
+def _proxy_lamp_view(proxy, occluder):
+    """How a proxy's leaves see the lights (sun, point, spot): against the full mesh, from
+    above its bumps and the proxy's distance to it.  The proxy's own triangles let light
+    through where the decimation moved a border: on family room 3's scan (100k triangles),
+    6.6 % more sun came through its window (and 1.4 % onto a wall the sun cannot reach) than
+    on the clean room, and its indirect light came out 7 % bright at high (lamp off 0.83 ->
+    0.75 CIEDE2000 against the full mesh)."""
+    if occluder is None:
+        return {}
+    deviation = float(np.percentile(proxy.deviation, 95)) if len(proxy.deviation) else 0.0
+    return {"light_occluder": occluder,
+            "light_lift": BUMPS * proxy.roughness + 2.0 * deviation}
 
 
 def _proxy(scene, opt, reuse, stage, orientation):
