@@ -524,8 +524,9 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         E = _lamp_emission(scene, system, light_occ)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
     report(1.0, "Done")
-    rays = sum(o.rays for o in {id(occluder): occluder, id(lamp_occluder): lamp_occluder}.values()
-               if o is not None)
+    rays = occluder.rays if occluder is not None else 0
+    if lamp_occluder is not occluder:            # the lights cast against another mesh
+        rays += lamp_occluder.rays
     counts = {"rays": rays, "cluster_links": len(cX)}
     context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV),
                "light_occluder": lamp_occluder, "light_lift": light_lift}
