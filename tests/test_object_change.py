@@ -108,3 +108,40 @@ def test_objects_only_occluder_counts_what_the_room_leaves_free():
     assert got.tolist() == [False, False, True, False]
     assert ObjectsOnlyOccluder(None, objects).segments_occluded(o, o + 1).tolist() == \
         [False, False, True, True]
+
+
+def test_an_object_takes_away_only_the_lamp_light_the_leaves_had():
+    """light_change reads the leaves' light as the solve lit it.  A proxy's leaves are lit
+    against the full mesh (shadowfree._proxy_lamp_view); here a floor under a point light,
+    solved with a lamp view in which a sheet blocks the light: a panel put between the lamp
+    and the floor takes nothing away.  Lit against the floor's own occluder (which has no
+    sheet), the same panel took away the light of its shadow, which the leaves never had."""
+    from relight_addon.core.geometry.raycast import make_occluder
+    from relight_addon.core.lights import POINT, Lights
+    from relight_addon.core.radiosity.presets import get_preset
+    from relight_addon.core.relight.object_change import light_change
+    floor = subdivide_quads(np.array([[0.0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]]), 4)
+    m = np.eye(4)
+    m[:3, 3] = [2.0, 2.0, 2.0]
+    lights = Lights.make(POINT, 0, m, np.full(3, 100.0))
+    n = len(floor)
+    room = SceneData(floor, 0.5, np.zeros((n, 3)), np.full(n, -1), ["lamp"], lights=lights)
+    assert np.allclose(room.area_normal()[1], [0, 0, 1])              # facing the lamp
+    sheet = np.array([[[0.0, 0, 1.5], [4, 0, 1.5], [4, 4, 1.5]], [[0, 0, 1.5], [4, 4, 1.5],
+                                                                   [0, 4, 1.5]]])
+    panel = quads_from_boxes([2.0, 2.0, 1.0], [1.0, 1.0, 0.02])[:1]
+    full = SceneData(np.concatenate([floor, panel]), 0.5, np.zeros((n + 1, 3)),
+                     np.full(n + 1, -1), ["lamp"], lights=lights,
+                     virtual=np.arange(n + 1) == n)
+    objects = VirtualObjects.of(full.virtual_last(), slice(n, n + 1))
+    q = get_preset("draft")
+    changes = {}
+    for view, light_occluder in (("own", None), ("sheet", make_occluder(sheet))):
+        sol = solve_radiosity(room, q, seed=0, light_occluder=light_occluder)
+        lit = sol.light_occ[0, :, 0]
+        d = light_change(objects, sol, sol.context["occluder"], sol.context["scale"], q, 0)
+        changes[view] = (lit.max(), d[0, :, 0].min(), np.abs(d).max())
+    lit, lost, _ = changes["own"]
+    assert lit > 1.0 and lost < -0.5 * lit            # the panel shadows the floor's middle
+    lit, _, moved = changes["sheet"]
+    assert lit == 0.0 and moved == 0.0

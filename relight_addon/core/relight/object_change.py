@@ -294,7 +294,9 @@ def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
 
 def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
     """(k, L, 3) change of the direct light of ``sol.scene.lights`` on the leaves (at the
-    solution's exitance factors), cast again only where an object can shadow them."""
+    solution's exitance factors), cast again only where an object can shadow them.  The leaves
+    see the lights as the solve lit them (a proxy's: against the full mesh, lifted;
+    shadowfree._proxy_lamp_view), so an object takes away only light they had."""
     h, leaves = sol.hierarchy, sol.leaves
     k = len(sol.basis)
     out = np.zeros((k, len(leaves), 3))
@@ -306,9 +308,12 @@ def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
     if not len(sel):
         return out
     s = np.ones(k) if sol.emission_scale is None else np.asarray(sol.emission_scale, float)
+    lamp_room = sol.context.get("light_occluder")
+    lamp_room = room if lamp_room is None else lamp_room
     past, whole = lights_on_elements(sol.scene, h, leaves[sel],
-                                     ObjectsOnlyOccluder(room, objects.occluder),
-                                     quality.quadrature, quality.rays, int(seed), scale)
+                                     ObjectsOnlyOccluder(lamp_room, objects.occluder),
+                                     quality.quadrature, quality.rays, int(seed), scale,
+                                     sol.context.get("light_lift", 0.0))
     out[:, sel] = (past - whole) * s[:, None, None]
     return out
 
