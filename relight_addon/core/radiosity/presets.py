@@ -56,11 +56,7 @@ class Quality:
     # 20 % more from the facing wall than that wall sends (F 0.2395 at its centre against
     # 0.1998): once the other walls were refined the emitted power came out 3 % high (0.7 %
     # with the source split, 1.1 % low with 2 x 2 points everywhere); 3 x 3 with the split's
-    # reciprocal shares (radiosity.source_split): 0.02 % (2 x 2: 0.11 %, the test's bound 0.1 %).
-    # Medium: 3.  RenderPark's classroom (24 fluorescent tubes under the ceiling) at 2 x 2 came
-    # out less accurate than draft against Mitsuba 3: walls 3-8 % dark, 9 % less light
-    # reflected (4.9 / 7.7 % mean / max); 3 x 3: 1.2 / 2.5 %.  Cornell box and family unchanged
-    # (seeds 0-4; seed 0), RenderPark's office 1.8 / 5.1 -> 1.6 / 6.0 %, medium 10-20 % slower
+    # reciprocal shares (radiosity.source_split): 0.02 % (2 x 2: 0.11 %, the test's bound 0.1 %)
     ff_quadrature: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
@@ -91,7 +87,7 @@ PRESETS = {
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
-                      split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3),
+                      split_levels=3, split_near=0.15, contact_levels=2),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
                     oracle_rays=8, separation=0.25, confirm_rays=4,
                     split_levels=3, split_near=0.15),
