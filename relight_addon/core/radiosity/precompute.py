@@ -78,6 +78,17 @@ class RadiositySolution:
     def n_elements(self):
         return self.hierarchy.n
 
+    def lamp_view(self, default=None):
+        """(occluder, lift) the leaves' light from ``scene.lights`` is cast with: a proxy's full
+        mesh from ``lift`` above the leaves (solve_radiosity's light_occluder), else the solve's
+        own occluder, else ``default``."""
+        occluder = self.context.get("light_occluder")
+        if occluder is None:
+            occluder = self.context.get("occluder")
+        if occluder is None:
+            occluder = default
+        return occluder, float(self.context.get("light_lift", 0.0))
+
     def radiosity(self, intensities=None) -> np.ndarray:
         """Leaf radiosity (L, 3) for lamp intensity factors I_k (default: the scene's own,
         ``scene.lamp_intensity``: 1 for every lamp unless one is off as given)."""
@@ -557,10 +568,10 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     _expose(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
             solution.scene, q)
     solution.system = system
+    lamp_occluder, lift = solution.lamp_view()
     solution.light_occ, solution.light_unocc = lights_on_elements(
-        solution.scene, h, system.leaves, ctx.get("light_occluder", ctx.get("occluder")),
-        q.quadrature, q.rays, int(rng.integers(2**31)), ctx.get("scale", 1.0),
-        ctx.get("light_lift", 0.0))
+        solution.scene, h, system.leaves, lamp_occluder, q.quadrature, q.rays,
+        int(rng.integers(2**31)), ctx.get("scale", 1.0), lift)
     solve_basis(solution, rho_leaf, emission_scale)
     return solution
 

@@ -308,12 +308,10 @@ def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
     if not len(sel):
         return out
     s = np.ones(k) if sol.emission_scale is None else np.asarray(sol.emission_scale, float)
-    lamp_room = sol.context.get("light_occluder")
-    lamp_room = room if lamp_room is None else lamp_room
+    lamp_room, lift = sol.lamp_view(room)
     past, whole = lights_on_elements(sol.scene, h, leaves[sel],
                                      ObjectsOnlyOccluder(lamp_room, objects.occluder),
-                                     quality.quadrature, quality.rays, int(seed), scale,
-                                     sol.context.get("light_lift", 0.0))
+                                     quality.quadrature, quality.rays, int(seed), scale, lift)
     out[:, sel] = (past - whole) * s[:, None, None]
     return out
 

@@ -68,9 +68,7 @@ def add_lamps(result, lights: Lights, names, seed=0):
     size = sol.context.get("scale", 1.0)
     proxy = sol.context.get("proxy")
     # (a proxy's leaves are lit as the run lit them: shadowfree._proxy_lamp_view)
-    occluder = sol.context.get("light_occluder", sol.context.get("occluder", result.occluder)) \
-        if proxy is not None else result.occluder
-    lift = sol.context.get("light_lift", 0.0) if proxy is not None else 0.0
+    occluder, lift = sol.lamp_view(result.occluder) if proxy is not None else (result.occluder, 0.0)
     # The new lamps' direct light on every leaf, then their bases on the existing system.
     lit_scene = _only_lights(scene, rows)
     occ, unocc = lights_on_elements(lit_scene, sol.hierarchy, sol.leaves, occluder,
