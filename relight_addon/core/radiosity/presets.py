@@ -57,6 +57,12 @@ class Quality:
     # 0.1998): once the other walls were refined the emitted power came out 3 % high (0.7 %
     # with the source split, 1.1 % low with 2 x 2 points everywhere); 3 x 3 with the split's
     # reciprocal shares (radiosity.source_split): 0.02 % (2 x 2: 0.11 %, the test's bound 0.1 %)
+    # Medium and high: 3.  On RenderPark's classroom (24 tubes of 0.05 m^2 under the ceiling)
+    # the walls' leaves that reach above a tube's plane read 3-8 % dark on 2 x 2 points: medium
+    # was less accurate than draft against Mitsuba 3 (4.88 / 7.74 % mean / max against 2.56 /
+    # 4.83 %), 1.18 / 2.52 % with 3; the Cornell box unchanged at medium and high over seeds
+    # 0-4, for 10 % more time (links._finer_form_factors: not where a touching object's side
+    # crosses the leaf)
     ff_quadrature: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
@@ -87,10 +93,10 @@ PRESETS = {
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
-                      split_levels=3, split_near=0.15, contact_levels=2),
+                      split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
                     oracle_rays=8, separation=0.25, confirm_rays=4,
-                    split_levels=3, split_near=0.15),
+                    split_levels=3, split_near=0.15, ff_quadrature=3),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
                      rays=32, oracle_rays=8, separation=0.15, confirm_rays=4,
                      split_levels=3, split_near=0.1),
