@@ -61,8 +61,10 @@ class Quality:
     # the walls' leaves that reach above a tube's plane read 3-8 % dark on 2 x 2 points: medium
     # was less accurate than draft against Mitsuba 3 (4.88 / 7.74 % mean / max against 2.56 /
     # 4.83 %), 1.18 / 2.52 % with 3; the Cornell box unchanged at medium and high over seeds
-    # 0-4, for 10 % more time (links._finer_form_factors: not where a touching object's side
-    # crosses the leaf)
+    # 0-4.  Cost: the Cornell box at medium 1.77 -> 2.09 s, RenderPark's office 110 -> 136 s
+    # (refining only the pairs whose 2 x 2 values spread took 117 s, but a leaf's row then mixes
+    # two quadratures and is no longer exactly 1 in a closed room: 9e-5 off).  Not where a
+    # touching object's side crosses the leaf (links._finer_form_factors)
     ff_quadrature: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
