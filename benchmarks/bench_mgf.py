@@ -142,7 +142,7 @@ def run(path, preset, timeout=3600):
 
 def report(rows, reference=None, scene="office"):
     RESULTS.mkdir(parents=True, exist_ok=True)
-    PEER = PEERS[scene]
+    peer = PEERS[scene]
     first = rows[0]
     load = os.getloadavg()[0]
     lines = [
@@ -153,8 +153,8 @@ def report(rows, reference=None, scene="office"):
         f"{first['backs']:,} backs where both sides are lit: {first['patches_oriented']:,} "
         "patches solved, one basis per lamp.  Each preset in its own process; peak RSS "
         "includes Python, numpy, scipy and Embree (the RSS before the solve is shown).  "
-        f"rpkCpp (the issue's measurement): {PEER['faces']:,} faces, {PEER['seconds']:.0f} s, "
-        f"{PEER['peak_mb']:.0f} MB.", "",
+        f"rpkCpp (the issue's measurement): {peer['faces']:,} faces, {peer['seconds']:.0f} s, "
+        f"{peer['peak_mb']:.0f} MB.", "",
         "| preset | elements | leaves | links | solve s | peak RSS MB | RSS before the solve MB "
         "| estimate MB | peak / rpkCpp's | time / rpkCpp's | GMRES iterations | residual "
         "| reflected / emitted | max row sum | vs Mitsuba mean % | max % |",
@@ -163,8 +163,8 @@ def report(rows, reference=None, scene="office"):
         lines.append(
             f"| {r['preset']} | {r['elements']:,} | {r['leaves']:,} | {r['links']:,} | "
             f"{r['solve_s']:.1f} | {r['peak_mb']:.0f} | {r['rss_before_mb']:.0f} | "
-            f"{r['estimate_mb']:.0f} | {r['peak_mb'] / PEER['peak_mb']:.2f} | "
-            f"{r['solve_s'] / PEER['seconds']:.2f} | {r['iterations']} | {r['residual']:.1e} | "
+            f"{r['estimate_mb']:.0f} | {r['peak_mb'] / peer['peak_mb']:.2f} | "
+            f"{r['solve_s'] / peer['seconds']:.2f} | {r['iterations']} | {r['residual']:.1e} | "
             f"{r['reflected_over_emitted']:.3f} | {r['rows_max']:.4f} | "
             + (f"{100 * r['ref_mean']:.2f} | {100 * r['ref_max']:.2f} |" if reference else "- | - |"))
     lines += ["", "Reading the file took {:.1f} s and orienting the faces {:.1f} s (not in the "
@@ -179,7 +179,7 @@ def report(rows, reference=None, scene="office"):
               f"{platform.python_version()}.  Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}."]
     if reference:
         lines[-3:-3] = [reference, ""]
-    (RESULTS / PEER["report"]).write_text("\n".join(lines) + "\n")
+    (RESULTS / peer["report"]).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
