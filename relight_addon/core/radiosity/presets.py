@@ -64,7 +64,8 @@ class Quality:
     # 0-4.  Cost: the Cornell box at medium 1.77 -> 2.09 s, RenderPark's office 110 -> 136 s
     # (refining only the pairs whose 2 x 2 values spread took 117 s, but a leaf's row then mixes
     # two quadratures and is no longer exactly 1 in a closed room: 9e-5 off).  Not where a
-    # touching object's side crosses the leaf (links._finer_form_factors)
+    # touching object's side crosses the leaf (links._finer_form_factors); twice as many a side
+    # where the source hovers just over the leaf's plane (links._hovering: a tube's reflector)
     ff_quadrature: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
