@@ -110,26 +110,50 @@ def reference_patches(scene, n=REFERENCE_PATCHES):
     return np.sort(cand[np.argsort(-area[cand], kind="stable")[:n]])
 
 
-def near_lamp_patches(scene, n=REFERENCE_PATCHES):
-    """The n patches that are not lamps (nor among the largest) with the most direct light,
-    unoccluded, at their centres; at least 1 % of the largest ones' smallest area, so that
-    Mitsuba's estimate stays sharp.  On the classroom these are the tube fixtures' reflectors,
-    where the largest patches did not show medium 10 % high (the twelfth session's note)."""
+def near_lamp_patches(scene, n=REFERENCE_PATCHES, shortlist=10, lamp_points=4):
+    """The n patches that are not lamps (nor among the largest) with the most direct light at
+    their centres: the ``shortlist`` x n with the most unoccluded, then the n with the most
+    seen past occluders from ``lamp_points`` x ``lamp_points`` points of every lamp (a face
+    3 mm behind another, lit in the open, is dark in fact).  At least 1 % of the largest
+    ones' smallest area, so that Mitsuba's estimate stays sharp.  On the classroom these are
+    the tube fixtures' reflectors, where the largest patches did not show medium 10 % high."""
     import numpy as np
     sys.path.insert(0, str(ROOT))
-    from relight_addon.core.geometry.formfactor import point_to_polygon
+    from relight_addon.core.geometry.formfactor import point_kernel, point_to_polygon
+    from relight_addon.core.geometry.raycast import ray_offset
+    from relight_addon.core.geometry.sampling import quadrature
     area, normal = scene.area_normal()
     largest = reference_patches(scene)
     cand = np.setdiff1d(np.flatnonzero((scene.lamp < 0) & (area >= 0.01 * area[largest].min())),
                         largest)
     centre = scene.corners[cand].mean(axis=1)
     lum = np.array([0.2126, 0.7152, 0.0722])
+    lamps = np.flatnonzero(scene.lamp >= 0)
     direct = np.zeros(len(cand))
-    for lamp in np.flatnonzero(scene.lamp >= 0):
+    for lamp in lamps:
         direct += (scene.emission[lamp] @ lum) * point_to_polygon(
             centre, normal[cand], np.repeat(scene.corners[lamp][None], len(cand), axis=0),
             np.repeat(normal[lamp][None], len(cand), axis=0))
-    return np.sort(cand[np.argsort(-direct, kind="stable")[:n]])
+    cand = cand[np.argsort(-direct, kind="stable")[:shortlist * n]]
+    centre = scene.corners[cand].mean(axis=1)
+    occluder = scene.make_occluder()
+    lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
+    eps = ray_offset(float(np.linalg.norm(hi - lo)))
+    seen = np.zeros(len(cand))
+    pts, w = quadrature(scene.corners[lamps], lamp_points)              # (lamps, k, 3)
+    for lamp, lp, lw in zip(lamps, pts, w):
+        q = np.broadcast_to(lp, (len(cand),) + lp.shape).reshape(-1, 3)
+        p = np.repeat(centre, len(lp), axis=0)
+        nr = np.repeat(normal[cand], len(lp), axis=0)
+        ns = np.broadcast_to(normal[lamp], q.shape)
+        kernel = (point_kernel(nr, ns, q - p) * np.tile(lw, len(cand))).reshape(len(cand), -1)
+        free = ~occluder.segments_occluded(p + eps * nr, q + eps * ns).reshape(len(cand), -1)
+        # the points weigh the visible fraction only: near a lamp their sum is far from F
+        fraction = (kernel * free).sum(axis=1) / np.maximum(kernel.sum(axis=1), 1e-300)
+        seen += (scene.emission[lamp] @ lum) * fraction * point_to_polygon(
+            centre, normal[cand], np.repeat(scene.corners[lamp][None], len(cand), axis=0),
+            np.repeat(normal[lamp][None], len(cand), axis=0))
+    return np.sort(cand[np.argsort(-seen, kind="stable")[:n]])
 
 
 def mitsuba_reference(path, probes, spp):
