@@ -341,7 +341,7 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
     n_points = len(point_of)
     if n_points and ff_pts is not None:
         at = slot[close]
-        on = value[:n_points].reshape(-1, mm).copy()
+        on = value[:n_points].reshape(-1, mm)         # a view: the masks write into value
         hover = _hovering(h, radius, leaf_ids[on_points], pair_src[on_points])
         usual = ~hover
         on[usual] = _finer_form_factors(h, on[usual], q_w[at[usual]], ff_pts[at[usual]],
@@ -352,7 +352,6 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
             on[hover] = _finer_form_factors(h, on[hover], q_w[at[hover]], pts, w,
                                             h.normal[pair_recv[on_points[hover]]],
                                             pair_src[on_points[hover]])
-        value[:n_points] = on.reshape(-1)
     f = np.empty(len(P))
     f_near = f[:nn].reshape(-1, mm)
     f_near[close] = value[:n_points].reshape(-1, mm)
