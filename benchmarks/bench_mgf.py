@@ -129,19 +129,18 @@ def near_lamp_patches(scene, n=REFERENCE_PATCHES, shortlist=10, lamp_points=4):
     centre = scene.corners[cand].mean(axis=1)
     lum = np.array([0.2126, 0.7152, 0.0722])
     lamps = np.flatnonzero(scene.lamp >= 0)
-    direct = np.zeros(len(cand))
-    for lamp in lamps:
-        direct += (scene.emission[lamp] @ lum) * point_to_polygon(
-            centre, normal[cand], np.repeat(scene.corners[lamp][None], len(cand), axis=0),
-            np.repeat(normal[lamp][None], len(cand), axis=0))
-    cand = cand[np.argsort(-direct, kind="stable")[:shortlist * n]]
-    centre = scene.corners[cand].mean(axis=1)
+    # (lamps, cand): each lamp's unoccluded light at each centre, read twice below
+    unoccluded = np.stack([(scene.emission[lamp] @ lum) * point_to_polygon(
+        centre, normal[cand], np.repeat(scene.corners[lamp][None], len(cand), axis=0),
+        np.repeat(normal[lamp][None], len(cand), axis=0)) for lamp in lamps])
+    keep = np.argsort(-unoccluded.sum(axis=0), kind="stable")[:shortlist * n]
+    cand, centre, unoccluded = cand[keep], centre[keep], unoccluded[:, keep]
     occluder = scene.make_occluder()
     lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
     eps = ray_offset(float(np.linalg.norm(hi - lo)))
     seen = np.zeros(len(cand))
     pts, w = quadrature(scene.corners[lamps], lamp_points)              # (lamps, k, 3)
-    for lamp, lp, lw in zip(lamps, pts, w):
+    for lamp, lp, lw, light in zip(lamps, pts, w, unoccluded):
         q = np.broadcast_to(lp, (len(cand),) + lp.shape).reshape(-1, 3)
         p = np.repeat(centre, len(lp), axis=0)
         nr = np.repeat(normal[cand], len(lp), axis=0)
@@ -150,9 +149,7 @@ def near_lamp_patches(scene, n=REFERENCE_PATCHES, shortlist=10, lamp_points=4):
         free = ~occluder.segments_occluded(p + eps * nr, q + eps * ns).reshape(len(cand), -1)
         # the points weigh the visible fraction only: near a lamp their sum is far from F
         fraction = (kernel * free).sum(axis=1) / np.maximum(kernel.sum(axis=1), 1e-300)
-        seen += (scene.emission[lamp] @ lum) * fraction * point_to_polygon(
-            centre, normal[cand], np.repeat(scene.corners[lamp][None], len(cand), axis=0),
-            np.repeat(normal[lamp][None], len(cand), axis=0))
+        seen += fraction * light
     return np.sort(cand[np.argsort(-seen, kind="stable")[:n]])
 
 
