@@ -65,7 +65,9 @@ class Quality:
     # (refining only the pairs whose 2 x 2 values spread took 117 s, but a leaf's row then mixes
     # two quadratures and is no longer exactly 1 in a closed room: 9e-5 off).  Not where a
     # touching object's side crosses the leaf (links._finer_form_factors); twice as many a side
-    # where the source hovers just over the leaf's plane (links._hovering: a tube's reflector)
+    # where the source hovers just over the leaf's plane (links._hovering: a tube's reflector),
+    # up to 16 a side where a small source stands on the leaf's edge (links._edge_contact_points:
+    # the reflector's end caps; the Cornell box and the clutter furnace have no such pair)
     ff_quadrature: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
