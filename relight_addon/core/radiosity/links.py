@@ -379,21 +379,14 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
     if n_points and ff_pts is not None:
         at = slot[close]
         on = value[:n_points].reshape(-1, mm)         # a view: the masks write into value
-        hover = _hovering(h, radius, leaf_ids[on_points], pair_src[on_points])
-        contact = _edge_contact_points(h, radius, leaf_ids[on_points], pair_src[on_points])
-        contact[hover | (contact * contact <= ff_pts.shape[1])] = 0  # the usual points do
-        usual = ~hover & (contact == 0)
-        on[usual] = _finer_form_factors(h, on[usual], q_w[at[usual]], ff_pts[at[usual]],
-                                        ff_w[at[usual]], h.normal[pair_recv[on_points[usual]]],
-                                        pair_src[on_points[usual]])
-        if hover.any():
-            pts, w = quadrature(h.corners[leaf_ids[on_points[hover]]], hover_m)
-            on[hover] = _finer_form_factors(h, on[hover], q_w[at[hover]], pts, w,
-                                            h.normal[pair_recv[on_points[hover]]],
-                                            pair_src[on_points[hover]])
-        for k in np.unique(contact[contact > 0]):
-            sel = contact == k
-            pts, w = quadrature(h.corners[leaf_ids[on_points[sel]]], int(k))
+        # points a side per pair beyond the leaf's own finer points (0: those do)
+        finer = _edge_contact_points(h, radius, leaf_ids[on_points], pair_src[on_points])
+        finer[_hovering(h, radius, leaf_ids[on_points], pair_src[on_points])] = hover_m
+        finer[finer * finer <= ff_pts.shape[1]] = 0
+        for k in np.unique(finer):
+            sel = finer == k
+            pts, w = (ff_pts[at[sel]], ff_w[at[sel]]) if k == 0 else \
+                quadrature(h.corners[leaf_ids[on_points[sel]]], int(k))
             on[sel] = _finer_form_factors(h, on[sel], q_w[at[sel]], pts, w,
                                           h.normal[pair_recv[on_points[sel]]],
                                           pair_src[on_points[sel]])
