@@ -111,26 +111,13 @@ def split_at_contacts(h: Hierarchy, segments, seg_patch, min_area):
     if len(segments) == 0:
         return 0
     n0 = h.n
-    # (leaf, segment) pairs to test: every leaf of a patch with segments, with each of them
-    order = np.argsort(seg_patch, kind="stable")
-    seg_patch = np.asarray(seg_patch)[order]
-    segments = np.asarray(segments)[order]
-    first = np.searchsorted(seg_patch, np.arange(int(h.patch[: h.n].max()) + 2))
-    leaves = h.leaves()
-    start = first[h.patch[leaves]]
-    cnt = first[h.patch[leaves] + 1] - start
-    li = np.repeat(leaves, cnt)
-    si = _segment_ranges(start, cnt)
+    segments, li, si = _leaf_segment_pairs(h, segments, seg_patch)
     while len(li):
         big = h.area[li] > min_area
         li, si = li[big], si[big]
         if len(li) == 0:
             break
-        quads = h.corners[li]
-        diam = np.linalg.norm(quads[:, 2] - quads[:, 0], axis=1)
-        hit, _, _ = _crossing(segments[si, 0], segments[si, 1], quads, h.normal[li],
-                              _INSIDE_TOL * diam)
-        li, si = li[hit], si[hit]
+        li, si = _crossed(h, segments, li, si)
         if len(li) == 0:
             break
         h.split(np.unique(li))
@@ -138,3 +125,35 @@ def split_at_contacts(h: Hierarchy, segments, seg_patch, min_area):
         li = (first_child[:, None] + np.arange(4)).ravel()
         si = np.repeat(si, 4)
     return h.n - n0
+
+
+def crossed_leaves(h: Hierarchy, segments, seg_patch) -> np.ndarray:
+    """(h.n,) bool: the leaves that a contact segment of their patch crosses (part of them
+    lies under the touching object)."""
+    crossed = np.zeros(h.n, bool)
+    if len(segments):
+        segments, li, si = _leaf_segment_pairs(h, segments, seg_patch)
+        crossed[_crossed(h, segments, li, si)[0]] = True
+    return crossed
+
+
+def _leaf_segment_pairs(h, segments, seg_patch):
+    """(segments sorted by patch, leaf ids, segment ids): every leaf with each segment of its
+    patch."""
+    order = np.argsort(seg_patch, kind="stable")
+    seg_patch = np.asarray(seg_patch)[order]
+    segments = np.asarray(segments)[order]
+    first = np.searchsorted(seg_patch, np.arange(int(h.patch[: h.n].max()) + 2))
+    leaves = h.leaves()
+    start = first[h.patch[leaves]]
+    cnt = first[h.patch[leaves] + 1] - start
+    return segments, np.repeat(leaves, cnt), _segment_ranges(start, cnt)
+
+
+def _crossed(h, segments, li, si):
+    """The (leaf, segment) pairs of ``li``, ``si`` whose segment crosses the leaf."""
+    quads = h.corners[li]
+    diam = np.linalg.norm(quads[:, 2] - quads[:, 0], axis=1)
+    hit, _, _ = _crossing(segments[si, 0], segments[si, 1], quads, h.normal[li],
+                          _INSIDE_TOL * diam)
+    return li[hit], si[hit]

@@ -78,6 +78,9 @@ _PARALLEL_LINKS = 20_000
 _THREADS = min(2, os.cpu_count() or 1)
 _CHUNK_POINTS = 100_000
 _RAY_BATCH = 1 << 17          # visibility rays traced at once in a chunk
+# Kronecker steps of the ray origins within their Gauss cell (the last two of the R4 sequence,
+# Roberts 2018: independent of R2's, which place the same rays' ends on the source)
+_ORIGIN_STEP = (0.6287067210378086, 0.53859725722361)
 
 
 @dataclass
@@ -400,7 +403,8 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
 
 
 def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
-                       with_leaves: bool = False, timer=_no_timer, ff_m: int = 0):
+                       with_leaves: bool = False, timer=_no_timer, ff_m: int = 0,
+                       jitter: bool = False, fixed=None, partial_rays: int = 0):
     """Accurate F (unoccluded) and V per link by nested quadrature over the receiver's leaves.
 
     Each Gauss point of each leaf under the receiver gets the exact point-to-polygon form factor
@@ -409,6 +413,13 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     ff_m x ff_m Gauss points (scaled onto its m x m points, whose rays still judge the
     visibility): one point on a leaf as large as its distance to the source errs by 20 %, and
     unlike the visibility the unoccluded form factor costs no rays.
+    With ``jitter`` the rays of a near leaf's point leave from spots spread over the point's
+    Gauss cell (the part of the leaf the point stands for) instead of from the point: a thin
+    occluder close to the leaf (a fluorescent tube between two reflector strips 10 cm wide)
+    hides a different part of the source from each spot, and a few fixed points see under it
+    (RenderPark's classroom: the reflectors read their partner 19 % bright at 2 x 2 points).
+    Except on the leaves ``fixed`` (h.n,) bool: those crossed by a contact line, whose exposure
+    (radiosity.exposure) is judged on the points, so their rays too must leave from there.
     With ``with_leaves`` also returns the per-leaf values (a LeafGather): gathering with them,
     instead of pushing the link's mean down, removes the receiver-side error of the hierarchy,
     at no extra cost since they are the same sums.
@@ -447,6 +458,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m
+    if jitter:      # the Gauss cells along u and v: [lo, lo + width) for each node
+        width = 0.5 * np.polynomial.legendre.leggauss(m)[1]
+        lo = np.concatenate([[0.0], np.cumsum(width)[:-1]])
 
     pts_per_link = count[r] * mm
     link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(pts_per_link) // _CHUNK_POINTS)) + 1)
@@ -491,6 +505,11 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         link_pt = link_of[pair_pt]
         src = ls[link_pt]
         points_per_link = np.bincount(link_pt, minlength=len(links))
+        spread = np.zeros(len(P), bool)     # points whose rays leave from over their cell
+        if jitter:
+            open_leaf = np.ones(len(near_pairs), bool) if fixed is None else \
+                ~fixed[leaf_ids[near_pairs]]
+            spread[:len(near_pairs) * mm] = np.repeat(open_leaf, mm)
         with timer("form_factors"):
             f = _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs,
                                    slot, mm, radius, q_w, ff_pts if ff_m > m else None,
@@ -499,26 +518,34 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             free_frac = np.ones(len(P))
         else:
             per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
-            ray_count = per_pt[link_pt]
-            ray_end = np.cumsum(ray_count)
-            ray_start = ray_end - ray_count
             recv_of_pt = lr[link_pt]
             # The rays of one point follow an R2 low-discrepancy sequence with a random shift
             # (Cranley-Patterson), so few rays still cover the source evenly.
             shift = chunk_rng.random((len(P), 2))
+            origin_shift = chunk_rng.random((len(P), 2)) if jitter else None
             tried = np.zeros(len(P))
             free_w = np.zeros(len(P))
             n_free = np.zeros(len(links))          # rays per link: free, blocked
             n_blocked = np.zeros(len(links))
             free_rays = []
-            # in batches of whole points' rays (bit for bit the same sums): a chunk's rays and
-            # their ~250 B of temporaries each, in two threads, were the office's peak at medium
-            bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH),
-                                                 side="right"))
-            for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(P)]):
-                ray_pt = np.repeat(np.arange(pt_a, pt_b), ray_count[pt_a:pt_b])
+
+            def cast(pts, ray_count, first):
+                """Rays first .. first + ray_count - 1 of each point of ``pts``."""
+                ray_end = np.cumsum(ray_count)
+                ray_start = ray_end - ray_count
+                # in batches of whole points' rays (bit for bit the same sums): a chunk's rays
+                # and their ~250 B of temporaries each, in two threads, were the office's peak
+                # at medium
+                bounds = np.unique(np.searchsorted(ray_end, np.arange(0, ray_end[-1], _RAY_BATCH),
+                                                   side="right"))
+                for pt_a, pt_b in zip(bounds, list(bounds[1:]) + [len(pts)]):
+                    at = np.repeat(np.arange(pt_a, pt_b), ray_count[pt_a:pt_b])
+                    ray_pt = pts[at]
+                    j = first[at] + np.arange(ray_start[pt_a], ray_end[pt_b - 1]) - ray_start[at]
+                    trace(ray_pt, j)
+
+            def trace(ray_pt, j):
                 ray_src = src[ray_pt]
-                j = np.arange(ray_start[pt_a], ray_end[pt_b - 1]) - ray_start[ray_pt]
                 xi_u = np.mod(j * R2[0] + shift[ray_pt, 0], 1.0)[:, None]
                 xi_v = np.mod(j * R2[1] + shift[ray_pt, 1], 1.0)[:, None]
                 u, v = area_uniform_uv(None, xi_u, xi_v, tuple(jac[ray_src].T))
@@ -534,6 +561,13 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 n_recv = h.normal[recv_of_pt[ray_pt]]
                 n_src = h.normal[ray_src]
                 Pr = P[ray_pt]
+                moved = np.flatnonzero(spread[ray_pt])
+                if len(moved):
+                    rp, jm = ray_pt[moved], j[moved]
+                    cu, cv = (rp % mm) % m, (rp % mm) // m
+                    ou = lo[cu] + width[cu] * np.mod(jm * _ORIGIN_STEP[0] + origin_shift[rp, 0], 1.0)
+                    ov = lo[cv] + width[cv] * np.mod(jm * _ORIGIN_STEP[1] + origin_shift[rp, 1], 1.0)
+                    Pr[moved] = bilinear_point(h.corners[leaf_ids[near_pairs[rp // mm]]], ou, ov)
                 kernel = point_kernel(n_recv, n_src, Q - Pr)
                 counts = kernel > 0
                 # lifted off their surfaces so as not to hit their own elements
@@ -545,13 +579,32 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 # Visible fraction weighted by the point-to-point kernel (a ratio estimator):
                 # the area fraction alone is biased where the hidden part of the source is
                 # nearer.
-                tried += np.bincount(ray_pt, kernel, len(P))
-                free_w += np.bincount(ray_pt, kernel * free, len(P))
+                tried[:] += np.bincount(ray_pt, kernel, len(P))
+                free_w[:] += np.bincount(ray_pt, kernel * free, len(P))
                 link_ray = link_pt[ray_pt]
-                n_free += np.bincount(link_ray, free, len(links))
-                n_blocked += np.bincount(link_ray, blocked, len(links))
+                n_free[:] += np.bincount(link_ray, free, len(links))
+                n_blocked[:] += np.bincount(link_ray, blocked, len(links))
                 if with_leaves:
                     free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
+
+            every = np.arange(len(P))
+            cast(every, per_pt[link_pt], np.zeros(len(P), np.int64))
+            if partial_rays > rays:
+                # links whose rays were partly blocked: a shadow's edge crosses them, and their
+                # visible fraction is the noisiest; they take partial_rays rays in all
+                more = (n_blocked > 0) & (n_free > 0)
+                extra = np.maximum(1, -(-partial_rays // np.maximum(points_per_link, 1))) - per_pt
+                pts = every[more[link_pt] & (extra[link_pt] > 0)]
+                if len(pts):
+                    cast(pts, extra[link_pt[pts]], per_pt[link_pt[pts]])
+            if spread.any():
+                # one visible fraction per (leaf, source) pair: its rays leave from spots over
+                # the whole leaf, so their kernel-weighted fraction is that of the integral of
+                # F over the leaf, which the points' form factors give exactly (per cell it is
+                # not: a Gauss point's weight is not its cell's share of that integral)
+                pj = pair_pt[spread]
+                tried[spread] = np.bincount(pj, tried[spread], n_pairs)[pj]
+                free_w[spread] = np.bincount(pj, free_w[spread], n_pairs)[pj]
             free_frac = np.where(tried > 0, free_w / np.where(tried > 0, tried, 1.0), 1.0)
             seen_free[links] |= n_free > 0
             seen_blocked[links] |= n_blocked > 0
@@ -580,7 +633,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         use = by_ray[ray_pt]
         if use.any():
             rp = ray_pt[use]
-            weight = W[rp] * f[rp] * kernel[use] / tried[rp] / pw[pair_pt[rp]]
+            # a ray's share of its point's F V (of its pair's when the rays' origins spread)
+            weight = np.where(spread[rp], pair_F[pair_pt[rp]] * kernel[use] / tried[rp],
+                              W[rp] * f[rp] * kernel[use] / tried[rp] / pw[pair_pt[rp]])
             src_leaf = h.locate(src[rp], u[use], v[use])
             chunk_parts.append(LeafGather.of(leaf_ids[pair_pt[rp]], src_leaf, np.zeros(len(rp)),
                                              weight))

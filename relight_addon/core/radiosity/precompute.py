@@ -25,7 +25,7 @@ from ..scene import SceneData, bilinear_point
 from .clusters import (build_cluster_tree, cluster_operator, cluster_transport,
                        cluster_visibility, link_clusters)
 from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage
-from .contacts import contact_segments, split_at_contacts
+from .contacts import contact_segments, crossed_leaves, split_at_contacts
 from .exposure import leaf_exposure
 from .gather_rows import GatherRows
 from .source_split import split_sources
@@ -388,9 +388,10 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         h = Hierarchy(scene)
         total_area = float(h.view("area").sum())
         min_area = q.min_area * total_area
+        contacts = contact_segments(scene, scale) if q.contact_levels > 0 or q.jitter_origins \
+            else None
         if q.contact_levels > 0:
-            segments, on_patch = contact_segments(scene, scale)
-            split_at_contacts(h, segments, on_patch, min_area / 4 ** q.contact_levels)
+            split_at_contacts(h, *contacts, min_area / 4 ** q.contact_levels)
         rho_max = scene.rho.max(axis=1)
         e_max = scene.emission.max(axis=1)
         receives = rho_max > 0
@@ -514,7 +515,10 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     with timer("final_links"):
         F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
                                                q.quadrature, q.rays, rng, scale, with_leaves=True,
-                                               timer=timer, ff_m=q.ff_quadrature)
+                                               timer=timer, ff_m=q.ff_quadrature,
+                                               jitter=q.jitter_origins,
+                                               partial_rays=q.partial_rays,
+                                               fixed=_crossed(h, contacts))
         give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
         give_back_memory()
@@ -540,7 +544,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         rays += lamp_occluder.rays
     counts = {"rays": rays, "cluster_links": len(cX)}
     context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV),
-               "light_occluder": lamp_occluder, "light_lift": light_lift}
+               "light_occluder": lamp_occluder, "light_lift": light_lift, "contacts": contacts}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
                              light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
                              counts, context)
@@ -554,11 +558,17 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     each lamp's exitance.  Updates ``solution`` in place and returns it.
     """
     h, q, ctx = solution.hierarchy, solution.quality, solution.context
+    contacts = ctx.get("contacts")
+    if contacts is None and q.jitter_origins:
+        contacts = contact_segments(solution.scene, ctx.get("scale", 1.0))
     rng = np.random.default_rng(seed)
     links = solution.links
     F, V, vis, gather = final_form_factors(h, links.receiver, links.source, ctx.get("occluder"),
                                            q.quadrature, q.rays, rng, ctx.get("scale", 1.0),
-                                           with_leaves=True, ff_m=q.ff_quadrature)
+                                           with_leaves=True, ff_m=q.ff_quadrature,
+                                           jitter=q.jitter_origins,
+                                           partial_rays=q.partial_rays,
+                                           fixed=_crossed(h, contacts))
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
     system, gather = _final_system(h, gather, ctx.get("clusters", (None, (), (), ())),
@@ -608,6 +618,11 @@ def _conserve(h, leaves, cluster_gather, gather, occluder, seed, scale, scene, m
     counted = scene.occluder.copy()
     counted[backs[backs >= 0]] = True
     conserve_rows(leaves, cluster_gather, gather, front, back, COVERAGE_RAYS, counted, h.patch)
+
+
+def _crossed(h, contacts):
+    """The leaves a contact line crosses (None without contact lines)."""
+    return None if contacts is None else crossed_leaves(h, *contacts)
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):
