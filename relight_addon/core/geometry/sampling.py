@@ -43,6 +43,13 @@ def gauss_grid(m: int):
     return np.stack([u.ravel(), v.ravel()], axis=1), (wu * wv).ravel()
 
 
+def gauss_cells(m: int):
+    """The cells of gauss_grid's nodes along one axis of [0, 1]: node i's cell is
+    [lo[i], lo[i] + width[i]), its width its weight (the cells tile [0, 1] in order)."""
+    width = 0.5 * np.polynomial.legendre.leggauss(m)[1]
+    return np.concatenate([[0.0], np.cumsum(width)[:-1]]), width
+
+
 def quadrature(corners: np.ndarray, m: int):
     """Gauss points (n, m*m, 3) and area weights (n, m*m) summing exactly to each patch's area.
 

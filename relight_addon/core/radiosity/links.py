@@ -21,8 +21,8 @@ import numpy as np
 
 from ..geometry.formfactor import point_kernel, point_to_polygon
 from ..geometry.raycast import ray_offset
-from ..geometry.sampling import (R2, area_uniform_uv, jacobian_coefficients, quadrature,
-                                 stratified_unit_square)
+from ..geometry.sampling import (R2, area_uniform_uv, gauss_cells, jacobian_coefficients,
+                                 quadrature, stratified_unit_square)
 from ..scene import bilinear_point
 from .hierarchy import Hierarchy
 from .memory import give_back_memory, growable, resized
@@ -459,8 +459,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m
     if jitter:      # the Gauss cells along u and v: [lo, lo + width) for each node
-        width = 0.5 * np.polynomial.legendre.leggauss(m)[1]
-        lo = np.concatenate([[0.0], np.cumsum(width)[:-1]])
+        lo, width = gauss_cells(m)
 
     pts_per_link = count[r] * mm
     link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(pts_per_link) // _CHUNK_POINTS)) + 1)
@@ -587,14 +586,13 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 if with_leaves:
                     free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
 
-            every = np.arange(len(P))
-            cast(every, per_pt[link_pt], np.zeros(len(P), np.int64))
+            cast(np.arange(len(P)), per_pt[link_pt], np.zeros(len(P), np.int64))
             if partial_rays > rays:
                 # links whose rays were partly blocked: a shadow's edge crosses them, and their
                 # visible fraction is the noisiest; they take partial_rays rays in all
                 more = (n_blocked > 0) & (n_free > 0)
                 extra = np.maximum(1, -(-partial_rays // np.maximum(points_per_link, 1))) - per_pt
-                pts = every[more[link_pt] & (extra[link_pt] > 0)]
+                pts = np.flatnonzero(more[link_pt] & (extra[link_pt] > 0))
                 if len(pts):
                     cast(pts, extra[link_pt[pts]], per_pt[link_pt[pts]])
             if spread.any():
