@@ -83,12 +83,14 @@ class Quality:
     # too few for the troughs: largest 0.55 / 2.19 -> 0.76 / 1.97 %, near the lamps 2.27 /
     # 4.06 (+1.6 %) -> 2.15 / 6.26 % (-1.7 %) (with partial_rays 32), so not there yet
     jitter_origins: bool = False
-    # a final link whose first rays were partly blocked takes this many in all (when more than
-    # ``rays``).  High with 128: the classroom 0.26 / 0.75 % on the largest, 0.25 / 0.62 % near
-    # the lamps, the Cornell box 0.31-0.35 / 0.90-0.95 %, but 1.3x the time and 2.3x the peak
-    # memory on the classroom (5.7 GB: every free ray of a partly visible link keeps a gather
-    # entry), so no preset uses it yet.  (Rays added after a first look are biased towards
-    # what the first rays saw: a link they all saw free keeps V = 1)
+    # a final link whose first rays were partly blocked (a shadow's edge crosses it, and its
+    # visible fraction is the noisiest) takes this many in all, when more than ``rays``.  High
+    # with 64, against Mitsuba 3: RenderPark's classroom's largest patches 0.41 / 1.37 ->
+    # 0.29 / 0.94 % mean / max, those near the lamps 0.41 / 0.89 -> 0.25 / 0.75 %, 440 -> 472 s,
+    # peak 1.50 -> 1.56 GB; the Cornell box over seeds 0-4 0.36-0.40 / 0.91-0.97 ->
+    # 0.33-0.36 / 0.90-1.02 %.  128: the classroom 0.26 / 0.75 and 0.25 / 0.62 %, but 664 s.
+    # (Rays added after a first look are biased towards what the first rays saw: a link they
+    # all saw free keeps V = 1)
     partial_rays: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
@@ -122,7 +124,8 @@ PRESETS = {
                       split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
                     oracle_rays=8, separation=0.25, confirm_rays=4,
-                    split_levels=3, split_near=0.15, ff_quadrature=3, jitter_origins=True),
+                    split_levels=3, split_near=0.15, ff_quadrature=3, jitter_origins=True,
+                    partial_rays=64),
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
                      rays=32, oracle_rays=8, separation=0.15, confirm_rays=4,
                      split_levels=3, split_near=0.1),
