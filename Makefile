@@ -12,6 +12,9 @@ PYTHON  ?= python3.11
 VENV    ?= .venv
 LTS     ?= .venv-lts
 PYTEST_ARGS ?= -q -rs -p no:cacheprovider
+# two worker processes, each taking whole test files (a file's module fixtures, Cycles bakes
+# and scans, are built once); the LTS run stays in one process (bpy 4.2's exit, conftest.py)
+PYTEST_JOBS ?= -n 2 --dist loadfile
 
 REQ_COMMON := requirements/runtime.txt requirements/test.txt
 REQ_MAIN   := requirements/blender.txt $(REQ_COMMON)
@@ -24,7 +27,7 @@ STAMP_LTS := $(LTS)/.requirements-stamp
 .PHONY: test demo extension wheels test-lts validate clean distclean venv venv-lts
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) tests
+	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
 
 demo: $(STAMP)
 	$(VENV)/bin/python -m demo.cornell
