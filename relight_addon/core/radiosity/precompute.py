@@ -518,7 +518,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                                                timer=timer, ff_m=q.ff_quadrature,
                                                jitter=q.jitter_origins,
                                                partial_rays=q.partial_rays,
-                                               fixed=_crossed(h, contacts, q))
+                                               fixed=_fixed_origin_leaves(h, contacts, q))
         give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
         give_back_memory()
@@ -565,7 +565,7 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
                                            with_leaves=True, ff_m=q.ff_quadrature,
                                            jitter=q.jitter_origins,
                                            partial_rays=q.partial_rays,
-                                           fixed=_crossed(h, ctx.get("contacts"), q))
+                                           fixed=_fixed_origin_leaves(h, ctx.get("contacts"), q))
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
     system, gather = _final_system(h, gather, ctx.get("clusters", (None, (), (), ())),
@@ -617,7 +617,7 @@ def _conserve(h, leaves, cluster_gather, gather, occluder, seed, scale, scene, m
     conserve_rows(leaves, cluster_gather, gather, front, back, COVERAGE_RAYS, counted, h.patch)
 
 
-def _crossed(h, contacts, q):
+def _fixed_origin_leaves(h, contacts, q):
     """The leaves a contact line crosses, whose rays stay on their points when the others'
     origins spread (None without spread origins or contact lines)."""
     return None if contacts is None or not q.jitter_origins else crossed_leaves(h, *contacts)
