@@ -11,10 +11,12 @@
 PYTHON  ?= python3.11
 VENV    ?= .venv
 LTS     ?= .venv-lts
-PYTEST_ARGS ?= -q -rs -p no:cacheprovider
+# the slowest tests listed at the end, so that CI's log shows where the suite's time goes
+PYTEST_ARGS ?= -q -rs -p no:cacheprovider --durations=25
 # two worker processes, each taking whole test files (a file's module fixtures, Cycles bakes
-# and scans, are built once); the LTS run stays in one process (bpy 4.2's exit, conftest.py)
-PYTEST_JOBS ?= -n 2 --dist loadfile
+# and scans, are built once), the longest files first (conftest.py's LONGEST_FIRST); the LTS
+# run stays in one process (bpy 4.2's exit, conftest.py)
+PYTEST_JOBS ?= -n 2 --dist loadfile --no-loadscope-reorder
 
 REQ_COMMON := requirements/runtime.txt requirements/test.txt
 REQ_MAIN   := requirements/blender.txt $(REQ_COMMON)
