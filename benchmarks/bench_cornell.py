@@ -4,7 +4,9 @@ Scene: cornell_box() (17 patches, patch 16 is the lamp).  Reference: Mitsuba 3 p
 at 2**22 spp per patch (tests/reference/mitsuba_ref.py, cached on disk).  Each preset runs in its
 own subprocess, twice (the faster total is kept, i.e. warm caches); "ultra" runs only if "high"
 took < 40 s and gets a 240 s budget (subprocess timeout: one run where a run takes more than
-half of it), else it is recorded as "skipped" / "timeout".  Error: relative error of B over the 16 non-lamp patches, all 3 channels.
+half of it), else it is recorded as "skipped" / "timeout".  Error: relative error of B over the
+16 non-lamp patches, all 3 channels.  The spread over seeds 0-4 (every preset, in this process)
+ends with the seeds where a preset is less accurate than the one below it.
 Writes benchmarks/results/cornell.md and cornell.png.
 
     python benchmarks/bench_cornell.py
