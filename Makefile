@@ -6,6 +6,8 @@
 #                    out/demo.blend; copy in benchmarks/results/demo_office.png)
 #   make extension   download the runtime wheels per platform, build dist/relight-*-<platform>.zip
 #   make test-lts    the same tests against Blender 4.2 LTS (bpy 4.2) in .venv-lts
+#   make test-cache  render again the Cycles bakes and Mitsuba references shipped in
+#                    tests/data/cache (after a change to a test scene or a bpy/Mitsuba update)
 #   make clean       remove build output and caches (keeps the venvs; `make distclean` removes them)
 
 PYTHON  ?= python3.11
@@ -26,7 +28,7 @@ REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
 STAMP     := $(VENV)/.requirements-stamp
 STAMP_LTS := $(LTS)/.requirements-stamp
 
-.PHONY: test demo extension wheels test-lts validate clean distclean venv venv-lts
+.PHONY: test demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
@@ -54,6 +56,17 @@ $(STAMP_LTS): $(REQ_LTS)
 test-lts: $(STAMP_LTS)
 	$(LTS)/bin/python -c "import bpy; print('bpy', bpy.app.version_string)"
 	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) tests
+
+# every test, from empty caches, then what they rendered becomes the shipped cache (conftest.py)
+test-cache: $(STAMP)
+	rm -rf .cache/bakes .cache/mitsuba tests/data/cache
+	env -u RELIGHT_BAKE_CACHE $(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests \
+		--ignore=tests/test_shipped_references.py
+	mkdir -p tests/data/cache
+	cp -r .cache/bakes .cache/mitsuba tests/data/cache/
+	$(VENV)/bin/python -c "import bpy, json, importlib.metadata as m; print(json.dumps({'bpy': \
+		bpy.app.version_string.split()[0], 'mitsuba': m.version('mitsuba')}, indent=1))" \
+		> tests/data/cache/versions.json
 
 validate: $(STAMP)
 	$(VENV)/bin/python tools/blender_ext.py validate .

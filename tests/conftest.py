@@ -1,6 +1,7 @@
 """Shared pytest set-up: make ``import relight_addon...`` work from the repository root."""
 
 import os
+import shutil
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -21,6 +22,37 @@ LONGEST_FIRST = ("test_proxy.py", "test_clutter_furnace.py", "test_shadowfree.py
 def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+# The Cycles bakes and Mitsuba 3 references the tests read (~7 min of one core on a clean
+# clone), shipped as a clean clone's first run left them in .cache.  Their keys hold the scene,
+# the settings and bpy's or Mitsuba's version, so a changed scene or another version renders
+# afresh; test_shipped_references.py re-renders a cheap subset against them.  `make test-cache`
+# rebuilds them.
+SHIPPED_CACHE = os.path.join(ROOT, "tests", "data", "cache")
+
+
+def shipped_cache_targets():
+    """{shipped folder: the cache folder the harness reads}."""
+    from reference.mitsuba_ref import CACHE_DIR
+    from scenes.bake import default_cache_dir
+    return {os.path.join(SHIPPED_CACHE, "bakes"): default_cache_dir(),
+            os.path.join(SHIPPED_CACHE, "mitsuba"): str(CACHE_DIR)}
+
+
+def pytest_sessionstart(session):
+    """Copies every shipped entry missing from the caches (each worker does: copies are
+    atomic, and an entry already there, shipped or rendered here, is kept)."""
+    for shipped, target in shipped_cache_targets().items():
+        for folder, _, files in os.walk(shipped):
+            out = os.path.join(target, os.path.relpath(folder, shipped))
+            for name in files:
+                dest = os.path.join(out, name)
+                if not os.path.exists(dest):
+                    os.makedirs(out, exist_ok=True)
+                    tmp = f"{dest}.{os.getpid()}.tmp"
+                    shutil.copyfile(os.path.join(folder, name), tmp)
+                    os.replace(tmp, dest)
 
 
 _exit_status = {}
