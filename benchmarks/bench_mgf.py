@@ -23,8 +23,13 @@ thread): 48 s and 0.9 GB for the office's 13,780 faces, 146 s and 0.78 GB for th
 
     python benchmarks/bench_mgf.py PATH/office.mgf [--presets draft,medium]
     python benchmarks/bench_mgf.py PATH/classroom.mgf
+    python benchmarks/bench_mgf.py PATH/office.mgf --presets draft,medium,high --seeds 1,2,3,4
 
-Writes benchmarks/results/mgf.md (the office) or mgf_classroom.md.
+Writes benchmarks/results/mgf.md (the office) or mgf_classroom.md, seed 0.  With ``--seeds``,
+the spread over the random seed (the oracle's and the final links' rays): each (seed, preset)
+solve is added to mgf_seeds_raw.json (or mgf_classroom_seeds_raw.json) as it ends, so that
+seeds can be run in several sittings, and mgf_seeds.md (mgf_classroom_seeds.md) is written
+from every seed stored there.
 """
 from __future__ import annotations
 
@@ -38,12 +43,16 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from bench_cornell import worse_than_below
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 # the issue's rpkCpp measurements, per scene, and where each report goes
-PEERS = {"office": {"faces": 13_780, "seconds": 48.0, "peak_mb": 900.0, "report": "mgf.md"},
+PEERS = {"office": {"faces": 13_780, "seconds": 48.0, "peak_mb": 900.0, "report": "mgf.md",
+                    "seeds": "mgf_seeds"},
          "classroom": {"faces": 5_250, "seconds": 146.0, "peak_mb": 780.0,
-                       "report": "mgf_classroom.md"}}
+                       "report": "mgf_classroom.md", "seeds": "mgf_classroom_seeds"}}
+PRESET_ORDER = ("draft", "medium", "high", "ultra")
 REFERENCE_PATCHES = 12
 # 4 M samples a patch: at 1 M the reference's own noise (0.63 % on the classroom's largest
 # patches) was the size of the gap between medium and high, and two 1 M runs differed by up to
@@ -51,7 +60,7 @@ REFERENCE_PATCHES = 12
 REFERENCE_SPP = 1 << 22
 
 
-def child(path, preset):
+def child(path, preset, seed=0):
     import resource
 
     import numpy as np
@@ -72,7 +81,7 @@ def child(path, preset):
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     estimate = estimate_precompute_memory(two, preset, proxy=False) / 2**20
     t0 = time.perf_counter()
-    sol = solve_radiosity(two, preset, seed=0)
+    sol = solve_radiosity(two, preset, seed=seed)
     B = sol.patch_radiosity()
     solve_s = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -85,7 +94,8 @@ def child(path, preset):
     near = near_lamp_patches(two)
     print(json.dumps(dict(probes=probes.tolist(), probe_radiosity=(B[probes] @ lum).tolist(),
         near_probes=near.tolist(), near_radiosity=(B[near] @ lum).tolist(),
-        preset=preset, faces=model.faces, patches=scene.n_patches, patches_oriented=two.n_patches,
+        preset=preset, seed=seed, faces=model.faces, patches=scene.n_patches,
+        patches_oriented=two.n_patches,
         flipped=int(oriented.flipped.sum()), backs=int(len(oriented.back_of)),
         lamps=len(scene.lamp_names), read_s=read_s, orient_s=orient_s, solve_s=solve_s,
         rss_before_mb=rss_before, peak_mb=peak, estimate_mb=estimate,
@@ -179,8 +189,8 @@ def mitsuba_reference(path, probes, spp):
     return B @ lum, err @ lum
 
 
-def run(path, preset, timeout=3600):
-    cmd = [sys.executable, __file__, str(path), "--child", preset]
+def run(path, preset, seed=0, timeout=3600):
+    cmd = [sys.executable, __file__, str(path), "--child", preset, "--seed", str(seed)]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     lines = [x for x in out.stdout.splitlines() if x.startswith("{")]
     if out.returncode or not lines:
@@ -235,56 +245,130 @@ def report(rows, reference=None, scene="office"):
     print("\n".join(lines))
 
 
+def score(path, rows):
+    """Each row's errors against Mitsuba 3 on the probes of the first row (the same patches at
+    every preset and seed: they depend on the scene only); returns the reference's paragraph."""
+    import numpy as np
+    probes, near = rows[0]["probes"], rows[0]["near_probes"]
+    both, both_err = mitsuba_reference(path, probes + near, REFERENCE_SPP)
+    ref, err = both[:len(probes)], both_err[:len(probes)]
+    near_ref, near_err = both[len(probes):], both_err[len(probes):]
+    lit = ref > 0             # a patch lying under another (a floor under its carpet) is dark
+    near_lit = near_ref > 0
+    for r in rows:
+        assert r["probes"] == probes and r["near_probes"] == near
+        ours = np.array(r["probe_radiosity"])
+        rel = np.abs(ours[lit] / ref[lit] - 1.0)
+        r["ref_mean"], r["ref_max"] = float(rel.mean()), float(rel.max())
+        r["dark_max"] = float(np.abs(ours[~lit]).max(initial=0.0))
+        signed = np.array(r["near_radiosity"])[near_lit] / near_ref[near_lit] - 1.0
+        r["near_mean"], r["near_max"] = float(np.abs(signed).mean()), float(np.abs(signed).max())
+        r["near_bias"] = float(signed.mean())
+    return (f"Mitsuba 3 reference (tests/reference/mitsuba_ref.py, {REFERENCE_SPP:,} "
+            f"samples per patch): luminance radiosity of the {len(probes)} largest "
+            "patches that are not lamps (walls, floor, ceiling, table tops), relative "
+            f"standard error {100 * float(np.mean(err[lit] / ref[lit])):.2f} % on "
+            f"average, {100 * float(np.max(err[lit] / ref[lit])):.2f} % at most.  "
+            f"{int((~lit).sum())} of them lie under other faces and are dark in Mitsuba "
+            "(ours at most " + ", ".join(f"{r['dark_max']:.3g}" for r in rows) +
+            f" there, the lit ones at {float(np.median(ref[lit])):.0f} in the median): "
+            "the error columns are over the others.  \"Near lamps\": the "
+            f"{len(near)} patches with the most direct light at their centres "
+            "(bench_mgf.near_lamp_patches: " + ", ".join(map(str, near)) + "), relative "
+            f"standard error {100 * float(np.mean(near_err[near_lit] / near_ref[near_lit])):.2f} % "
+            "on average; their mean signed error is the bias column.")
+
+
+def seed_spread(path, scene, presets, seeds):
+    """Runs every (seed, preset) in its own process, adding each to the scene's raw file as it
+    ends, then writes the spread over every seed stored there."""
+    raw_path = RESULTS / (PEERS[scene]["seeds"] + "_raw.json")
+    raw = json.loads(raw_path.read_text()) if raw_path.exists() else []
+    for seed in seeds:
+        for preset in presets:
+            raw = [r for r in raw if (r["seed"], r["preset"]) != (seed, preset)]
+            row = run(path, preset, seed)
+            raw.append(row)
+            raw.sort(key=lambda r: (r["seed"], PRESET_ORDER.index(r["preset"])))
+            RESULTS.mkdir(parents=True, exist_ok=True)
+            raw_path.write_text(json.dumps(raw, indent=1) + "\n")
+            print(f"seed {seed} {preset}: {row['solve_s']:.0f} s", flush=True)
+    reference = score(path, raw)
+    presets_run = [p for p in PRESET_ORDER if any(r["preset"] == p for r in raw)]
+    seeds_run = sorted({r["seed"] for r in raw})
+    # the comparison pairs presets seed by seed: only seeds solved at every preset
+    complete = [s for s in seeds_run
+                if {r["preset"] for r in raw if r["seed"] == s} == set(presets_run)]
+
+    def by_preset(mean, worst):       # {preset: [(seed, links, mean, max)]}, as bench_cornell's
+        return {p: [(r["seed"], r["links"], r[mean], r[worst]) for r in raw
+                    if r["preset"] == p and r["seed"] in complete] for p in presets_run}
+    lines = [f"# RenderPark's {scene} (MGF): spread over the random seed", "",
+             "Generated by `benchmarks/bench_mgf.py --seeds` (the raw figures: "
+             f"`{raw_path.name}`).  Seeds {', '.join(map(str, seeds_run))}; each (seed, preset) "
+             "solved in its own process, as in the main table (which is seed 0 alone).  The "
+             "oracle's and the final links' rays are random; the probes are the same patches "
+             "at every seed.  The solve times compare with the main table's only if both ran "
+             "alone on the machine (see the load average at the end).", "",
+             "| seed | preset | links | solve s | peak RSS MB | largest: mean % | max % "
+             "| near lamps: mean % | max % | bias % |",
+             "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in raw:
+        lines.append(f"| {r['seed']} | {r['preset']} | {r['links']:,} | {r['solve_s']:.0f} | "
+                     f"{r['peak_mb']:.0f} | {100 * r['ref_mean']:.2f} | {100 * r['ref_max']:.2f} | "
+                     f"{100 * r['near_mean']:.2f} | {100 * r['near_max']:.2f} | "
+                     f"{100 * r['near_bias']:+.2f} |")
+    lines += ["", "Min - max over the seeds:", "",
+              "| preset | largest: mean % | max % | near lamps: mean % | max % | bias % |",
+              "|---|---:|---:|---:|---:|---:|"]
+    for p in presets_run:
+        rs = [r for r in raw if r["preset"] == p]
+
+        def span(key, fmt="{:.2f}"):
+            v = [100 * r[key] for r in rs]
+            return fmt.format(min(v)) + " - " + fmt.format(max(v))
+        lines.append(f"| {p} | {span('ref_mean')} | {span('ref_max')} | {span('near_mean')} | "
+                     f"{span('near_max')} | {span('near_bias', '{:+.2f}')} |")
+    worse = (worse_than_below(by_preset("ref_mean", "ref_max"))
+             + [w + " (near lamps)" for w in worse_than_below(by_preset("near_mean", "near_max"))])
+    lines += ["", "A preset less accurate than the one below it on a seed (mean or max, "
+              f"largest patches or near lamps; seeds {', '.join(map(str, complete))}): "
+              + (", ".join(worse) or "none") + ".", "",
+              reference, "",
+              f"Load average at the end: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; Python "
+              f"{platform.python_version()}.  Date: "
+              f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}."]
+    (RESULTS / (PEERS[scene]["seeds"] + ".md")).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("path")
     ap.add_argument("--presets", default="draft,medium")
     ap.add_argument("--child")
+    ap.add_argument("--seed", type=int, default=0, help="the child's seed")
+    ap.add_argument("--seeds", help="comma-separated: the spread over these seeds (see above)")
     ap.add_argument("--no-reference", action="store_true")
     ap.add_argument("--scene", choices=sorted(PEERS), help="default: the file's name")
     args = ap.parse_args()
     if args.child:
-        child(args.path, args.child)
+        child(args.path, args.child, args.seed)
         return
     if not Path(args.path).is_file():
         sys.exit(f"{args.path}: no such file (see this script's docstring for where to get it)")
     scene = args.scene or Path(args.path).stem
     if scene not in PEERS:
         sys.exit(f"{args.path}: which scene is it? (--scene {'/'.join(sorted(PEERS))})")
+    if args.seeds is not None:           # --seeds= (none) writes the report from the raw file
+        seed_spread(args.path, scene, args.presets.split(","),
+                    [int(x) for x in args.seeds.split(",") if x])
+        return
     rows = []
     for preset in args.presets.split(","):
         rows.append(run(args.path, preset))
         print(preset, {k: v for k, v in rows[-1].items() if not k.startswith("probe")}, flush=True)
-    reference = None
-    if not args.no_reference:
-        import numpy as np
-        probes, near = rows[0]["probes"], rows[0]["near_probes"]
-        both, both_err = mitsuba_reference(args.path, probes + near, REFERENCE_SPP)
-        ref, err = both[:len(probes)], both_err[:len(probes)]
-        near_ref, near_err = both[len(probes):], both_err[len(probes):]
-        lit = ref > 0             # a patch lying under another (a floor under its carpet) is dark
-        near_lit = near_ref > 0
-        for r in rows:
-            ours = np.array(r["probe_radiosity"])
-            rel = np.abs(ours[lit] / ref[lit] - 1.0)
-            r["ref_mean"], r["ref_max"] = float(rel.mean()), float(rel.max())
-            r["dark_max"] = float(np.abs(ours[~lit]).max(initial=0.0))
-            signed = np.array(r["near_radiosity"])[near_lit] / near_ref[near_lit] - 1.0
-            r["near_mean"], r["near_max"] = float(np.abs(signed).mean()), float(np.abs(signed).max())
-            r["near_bias"] = float(signed.mean())
-        reference = (f"Mitsuba 3 reference (tests/reference/mitsuba_ref.py, {REFERENCE_SPP:,} "
-                     f"samples per patch): luminance radiosity of the {len(probes)} largest "
-                     "patches that are not lamps (walls, floor, ceiling, table tops), relative "
-                     f"standard error {100 * float(np.mean(err[lit] / ref[lit])):.2f} % on "
-                     f"average, {100 * float(np.max(err[lit] / ref[lit])):.2f} % at most.  "
-                     f"{int((~lit).sum())} of them lie under other faces and are dark in Mitsuba "
-                     "(ours at most " + ", ".join(f"{r['dark_max']:.3g}" for r in rows) +
-                     f" there, the lit ones at {float(np.median(ref[lit])):.0f} in the median): "
-                     "the error columns are over the others.  \"Near lamps\": the "
-                     f"{len(near)} patches with the most direct light at their centres "
-                     "(bench_mgf.near_lamp_patches: " + ", ".join(map(str, near)) + "), relative "
-                     f"standard error {100 * float(np.mean(near_err[near_lit] / near_ref[near_lit])):.2f} % "
-                     "on average; their mean signed error is the bias column.")
+    reference = None if args.no_reference else score(args.path, rows)
     report(rows, reference, scene)
 
 
