@@ -57,13 +57,16 @@ test-lts: $(STAMP_LTS)
 	$(LTS)/bin/python -c "import bpy; print('bpy', bpy.app.version_string)"
 	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) tests
 
-# every test, from empty caches, then what they rendered becomes the shipped cache (conftest.py)
+# every test, from empty caches of its own (a developer's .cache, benchmarks' references
+# included, is left alone), then what they rendered becomes the shipped cache (conftest.py)
+FRESH_CACHE := $(CURDIR)/.cache/test-cache
 test-cache: $(STAMP)
-	rm -rf .cache/bakes .cache/mitsuba tests/data/cache
-	env -u RELIGHT_BAKE_CACHE $(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests \
+	rm -rf $(FRESH_CACHE) tests/data/cache
+	RELIGHT_BAKE_CACHE=$(FRESH_CACHE)/bakes RELIGHT_MITSUBA_CACHE=$(FRESH_CACHE)/mitsuba \
+		$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests \
 		--ignore=tests/test_shipped_references.py
 	mkdir -p tests/data/cache
-	cp -r .cache/bakes .cache/mitsuba tests/data/cache/
+	cp -r $(FRESH_CACHE)/bakes $(FRESH_CACHE)/mitsuba tests/data/cache/
 	$(VENV)/bin/python -c "import bpy, json, importlib.metadata as m; print(json.dumps({'bpy': \
 		bpy.app.version_string.split()[0], 'mitsuba': m.version('mitsuba')}, indent=1))" \
 		> tests/data/cache/versions.json

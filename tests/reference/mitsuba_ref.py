@@ -41,10 +41,11 @@ Cornell box at 2**22 spp per patch gives <= ~0.4 % relative standard error.  Kno
 grazing sensor rays (cos < ~1e-2) can re-hit their own patch from behind (float32 offset),
 making H low by ~1e-4 relative -- far below the tolerances used.
 
-Cache: results are stored under ``<repo>/.cache/mitsuba/<key>/p<patch>.npy`` (gitignored; one
-(2, 3) array [H, stderr] per patch, written as soon as the patch is done) with ``<key>`` a
-SHA-256 of the geometry, rho, emission, occluder flags, spp, max_depth, seed, repeats, the
-Mitsuba version, variant and this module's ``CACHE_FORMAT``.
+Cache: results are stored under ``<repo>/.cache/mitsuba/<key>/p<patch>.npy`` (or under
+``$RELIGHT_MITSUBA_CACHE``; gitignored; one (2, 3) array [H, stderr] per patch, written as
+soon as the patch is done) with ``<key>`` a SHA-256 of the geometry, rho, emission, occluder
+flags, spp, max_depth, seed, repeats, the Mitsuba version, variant and this module's
+``CACHE_FORMAT``.
 
 Variant: ``scalar_rgb`` (env ``RELIGHT_MITSUBA_VARIANT`` overrides).  ``llvm_ad_rgb`` aborts on
 this machine (LLVM 15 "Cannot select fminimum"; LLVM 14 is refused as too old).
@@ -67,7 +68,7 @@ if str(REPO_ROOT) not in sys.path:  # allow `pytest tests/...` without installin
 from relight_addon.core.scene import SceneData, quad_area_normal
 
 CACHE_FORMAT = 2
-CACHE_DIR = REPO_ROOT / ".cache" / "mitsuba"
+CACHE_DIR = Path(os.environ.get("RELIGHT_MITSUBA_CACHE") or REPO_ROOT / ".cache" / "mitsuba")
 VARIANT = os.environ.get("RELIGHT_MITSUBA_VARIANT", "scalar_rgb")
 DEFAULT_SPP = 1 << 20
 DEFAULT_REPEATS = 8
