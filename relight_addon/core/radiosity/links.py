@@ -404,7 +404,8 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
 
 def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, scale: float,
                        with_leaves: bool = False, timer=_no_timer, ff_m: int = 0,
-                       jitter: bool = False, fixed=None, partial_rays: int = 0):
+                       jitter: bool = False, fixed=None, partial_rays: int = 0,
+                       spread_links=None, spread_rays: int = 0):
     """Accurate F (unoccluded) and V per link by nested quadrature over the receiver's leaves.
 
     Each Gauss point of each leaf under the receiver gets the exact point-to-polygon form factor
@@ -418,6 +419,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     occluder close to the leaf (a fluorescent tube between two reflector strips 10 cm wide)
     hides a different part of the source from each spot, and a few fixed points see under it
     (RenderPark's classroom: the reflectors read their partner 19 % bright at 2 x 2 points).
+    Without ``jitter``, the near leaves of the links ``spread_links`` (n,) bool alone are cast
+    so, ``spread_rays`` rays a leaf at least: shadows the refinement could not resolve.
     Except on the leaves ``fixed`` (h.n,) bool: those crossed by a contact line, whose exposure
     (radiosity.exposure) is judged on the points, so their rays too must leave from there.
     With ``with_leaves`` also returns the per-leaf values (a LeafGather): gathering with them,
@@ -458,7 +461,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m
-    if jitter:      # the Gauss cells along u and v: [lo, lo + width) for each node
+    if spread_links is not None and not jitter and not spread_links.any():
+        spread_links = None
+    if jitter or spread_links is not None:    # the Gauss cells along u and v: [lo, lo + width)
         lo, width = gauss_cells(m)
 
     pts_per_link = count[r] * mm
@@ -505,9 +510,11 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         src = ls[link_pt]
         points_per_link = np.bincount(link_pt, minlength=len(links))
         spread = np.zeros(len(P), bool)     # points whose rays leave from over their cell
-        if jitter:
+        if jitter or spread_links is not None:
             open_leaf = np.ones(len(near_pairs), bool) if fixed is None else \
                 ~fixed[leaf_ids[near_pairs]]
+            if not jitter:
+                open_leaf &= spread_links[links][link_of[near_pairs]]
             spread[:len(near_pairs) * mm] = np.repeat(open_leaf, mm)
         with timer("form_factors"):
             f = _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs,
@@ -517,11 +524,14 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
             free_frac = np.ones(len(P))
         else:
             per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
+            ray_count = per_pt[link_pt]
+            if spread_links is not None and not jitter:
+                ray_count[spread] = np.maximum(ray_count[spread], -(-spread_rays // mm))
             recv_of_pt = lr[link_pt]
             # The rays of one point follow an R2 low-discrepancy sequence with a random shift
             # (Cranley-Patterson), so few rays still cover the source evenly.
             shift = chunk_rng.random((len(P), 2))
-            origin_shift = chunk_rng.random((len(P), 2)) if jitter else None
+            origin_shift = chunk_rng.random((len(P), 2)) if spread.any() else None
             tried = np.zeros(len(P))
             free_w = np.zeros(len(P))
             n_free = np.zeros(len(links))          # rays per link: free, blocked
@@ -586,15 +596,16 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
                 if with_leaves:
                     free_rays.append((ray_pt[free], kernel[free], u[free, 0], v[free, 0]))
 
-            cast(np.arange(len(P)), per_pt[link_pt], np.zeros(len(P), np.int64))
+            cast(np.arange(len(P)), ray_count, np.zeros(len(P), np.int64))
             if partial_rays > rays:
                 # links whose rays were partly blocked: a shadow's edge crosses them, and their
                 # visible fraction is the noisiest; they take partial_rays rays in all
                 more = (n_blocked > 0) & (n_free > 0)
-                extra = np.maximum(1, -(-partial_rays // np.maximum(points_per_link, 1))) - per_pt
-                pts = np.flatnonzero(more[link_pt] & (extra[link_pt] > 0))
+                extra = np.maximum(1, -(-partial_rays // np.maximum(points_per_link, 1)))[link_pt] \
+                    - ray_count
+                pts = np.flatnonzero(more[link_pt] & (extra > 0))
                 if len(pts):
-                    cast(pts, extra[link_pt[pts]], per_pt[link_pt[pts]])
+                    cast(pts, extra[pts], ray_count[pts])
             if spread.any():
                 # one visible fraction per (leaf, source) pair: its rays leave from spots over
                 # the whole leaf, so their kernel-weighted fraction is that of the integral of

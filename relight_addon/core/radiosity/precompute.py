@@ -31,7 +31,7 @@ from .gather_rows import GatherRows
 from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .memory import give_back_memory
-from .links import (PARTIAL, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
+from .links import (PARTIAL, _close, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
                     visibility_types)
 from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
@@ -310,9 +310,13 @@ def _confirm_visibility(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, 
     if occluder is None or links.n == 0 or q.confirm_rays <= 0:
         return links
     r, s = links.receiver, links.source
+    room = h.area[r] / 4 >= SHADOW_AREA_FACTOR * min_area
+    if q.spread_rays and not q.jitter_origins:
+        # and where the final rays of a close link spread (_unresolved_shadows) if partial
+        room |= _close(h, h.radius(), r, s)
     check = ((links.vis != PARTIAL)
              & (rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
-             & (h.area[r] / 4 >= SHADOW_AREA_FACTOR * min_area))
+             & room)
     if not check.any():
         return links
     idx = np.flatnonzero(check)
@@ -510,6 +514,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     report(0.7, f"Form factors and visibility for {kept.n} links")
     receiver, source = kept.receiver, kept.source
+    spread_links = _unresolved_shadows(h, kept, b_est, b_scale, rho_max, q, min_area)
     del kept                            # the oracle's estimates: 77 B a link
     give_back_memory()
     with timer("final_links"):
@@ -518,6 +523,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                                                timer=timer, ff_m=q.ff_quadrature,
                                                jitter=q.jitter_origins,
                                                partial_rays=q.partial_rays,
+                                               spread_links=spread_links,
+                                               spread_rays=q.spread_rays,
                                                fixed=_fixed_origin_leaves(h, contacts, q))
         give_back_memory()          # the form factors' threads' freed arrays (memory.py)
         split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
@@ -544,7 +551,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
         rays += lamp_occluder.rays
     counts = {"rays": rays, "cluster_links": len(cX)}
     context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV),
-               "light_occluder": lamp_occluder, "light_lift": light_lift, "contacts": contacts}
+               "light_occluder": lamp_occluder, "light_lift": light_lift, "contacts": contacts,
+               "spread_links": spread_links}
     return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
                              light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
                              counts, context)
@@ -565,6 +573,8 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
                                            with_leaves=True, ff_m=q.ff_quadrature,
                                            jitter=q.jitter_origins,
                                            partial_rays=q.partial_rays,
+                                           spread_links=ctx.get("spread_links"),
+                                           spread_rays=q.spread_rays,
                                            fixed=_fixed_origin_leaves(h, ctx.get("contacts"), q))
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     solution.links = LinkSet(links.receiver, links.source, F, V, vis)
@@ -620,7 +630,26 @@ def _conserve(h, leaves, cluster_gather, gather, occluder, seed, scale, scene, m
 def _fixed_origin_leaves(h, contacts, q):
     """The leaves a contact line crosses, whose rays stay on their points when the others'
     origins spread (None without spread origins or contact lines)."""
-    return None if contacts is None or not q.jitter_origins else crossed_leaves(h, *contacts)
+    if contacts is None or not (q.jitter_origins or q.spread_rays):
+        return None
+    return crossed_leaves(h, *contacts)
+
+
+def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area):
+    """(n,) bool: the links whose near pairs' rays leave from spots spread over the leaf
+    (``q.spread_rays``; None when the preset spreads every near pair or none): partly visible
+    (the oracle's rays), bright enough for the BFV criterion (_oracle's ``shadow``), close to
+    their receiver, whose area leaves no room to refine the shadow.  There a few fixed points
+    judge a visibility that varies across the leaf: RenderPark's classroom's reflectors, one
+    leaf each at medium, read their partner, a third of it hidden by the tube between them,
+    20 % bright (seen free from all four points)."""
+    if not q.spread_rays or q.jitter_origins or links.n == 0:
+        return None
+    r, s = links.receiver, links.source
+    return ((links.vis == PARTIAL)
+            & (rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
+            & (h.area[r] / 4 < SHADOW_AREA_FACTOR * min_area)
+            & _close(h, h.radius(), r, s))
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):

@@ -92,6 +92,16 @@ class Quality:
     # (Rays added after a first look are biased towards what the first rays saw: a link they
     # all saw free keeps V = 1)
     partial_rays: int = 0
+    # without ``jitter_origins``: the near pairs of shadows the refinement had no room to
+    # resolve (precompute._unresolved_shadows) cast this many rays a leaf from spots spread over
+    # it.  Medium: 256.  RenderPark's classroom's reflectors (one leaf each at medium) read the
+    # reflector facing them, a sixth of it hidden by the tube between them, 20 % bright from
+    # 2 x 2 fixed points (no ray met the tube): the patches near the lamps came out 1.0-2.1 %
+    # bright on every seed, 1.76 / 3.33 % mean / max on seed 1, draft 1.60 / 4.71 %; with
+    # 256: 0.49 / 1.38 % (-0.3 % bias), the largest patches 0.47 / 1.17 -> 0.63 / 1.12 %,
+    # 213 -> 206 s.  (128 on one fixture over a floor, 16 seeds: the reflectors' +3.0 % bias
+    # gone, their spread over seeds 0.9-1.2 -> 1.2-2.1 %; 256: 0.9-1.8 %)
+    spread_rays: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
     # the shadow-edge fit's bias floor (log-ratio sigma) before the photo overrides a lamp's set
@@ -121,7 +131,8 @@ PRESETS = {
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
-                      split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3),
+                      split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3,
+                      spread_rays=256),
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
                     oracle_rays=8, separation=0.25, confirm_rays=4,
                     split_levels=3, split_near=0.15, ff_quadrature=3, jitter_origins=True,
