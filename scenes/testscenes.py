@@ -16,6 +16,7 @@ Functions
 ``closed_cube(rho, emission, n=1)``     furnace: inward-facing unit cube, uniform rho and E
 ``parallel_squares(distance=1, ...)``   unit emitter above a unit receiver, optional blocker
 ``perpendicular_squares()``             unit emitter and unit receiver sharing an edge
+``ceiling_fixture()``                   a fluorescent tube between two reflectors, over a floor
 
 Analytic form factors for the two-square scenes are in ``PARALLEL_UNIT_SQUARES_F1`` and
 ``PERPENDICULAR_UNIT_SQUARES_F``.
@@ -240,3 +241,38 @@ def perpendicular_squares(receiver_rho=0.5, emitter_exitance=1.0) -> SceneData:
         (_square(0.0, facing_up=True), receiver_rho, 0.0, -1, True, 1),
     ]
     return _assemble(parts, lamp_names=["emitter"])
+
+
+def ceiling_fixture() -> SceneData:
+    """One of the 24 tube fixtures of RenderPark's classroom (etc/salon/classroom.mgf), its
+    coordinates relative to the tube, 3.46 m over a 20 m square floor (rho 0.5) that makes the
+    total area the classroom's (403 m^2: the presets' element sizes are fractions of it).
+    The fixture is a 1.4 m trough, rho 0.8: two slanted reflectors 10 cm wide facing each
+    other and down, end caps, a top; its tube (1.3 m x 4 cm, exitance 556 / 553 / 504, rho
+    0.5) faces down between the reflectors, 2 cm under the top.  Patch order: 0-4 the
+    trough's outside (left, cap, right, cap, top), 5 the left reflector, 6 a cap, 7 the right
+    reflector, 8 a cap, 9 the top inside, 10 the tube (lamp 0), 11 the floor."""
+    trough = np.array([
+        [[-0.04, 0.7, 0.02], [-0.1, 0.7, -0.06], [-0.1, -0.7, -0.06], [-0.04, -0.7, 0.02]],
+        [[-0.04, 0.7, 0.02], [0.04, 0.7, 0.02], [0.1, 0.7, -0.06], [-0.1, 0.7, -0.06]],
+        [[0.1, 0.7, -0.06], [0.04, 0.7, 0.02], [0.04, -0.7, 0.02], [0.1, -0.7, -0.06]],
+        [[0.1, -0.7, -0.06], [0.04, -0.7, 0.02], [-0.04, -0.7, 0.02], [-0.1, -0.7, -0.06]],
+        [[0.04, 0.7, 0.02], [-0.04, 0.7, 0.02], [-0.04, -0.7, 0.02], [0.04, -0.7, 0.02]],
+        [[-0.098, 0.698, -0.062], [-0.038, 0.698, 0.018], [-0.038, -0.698, 0.018],
+         [-0.098, -0.698, -0.062]],
+        [[-0.038, 0.698, 0.018], [-0.098, 0.698, -0.062], [0.098, 0.698, -0.062],
+         [0.038, 0.698, 0.018]],
+        [[0.038, 0.698, 0.018], [0.098, 0.698, -0.062], [0.098, -0.698, -0.062],
+         [0.038, -0.698, 0.018]],
+        [[-0.098, -0.698, -0.062], [-0.038, -0.698, 0.018], [0.038, -0.698, 0.018],
+         [0.098, -0.698, -0.062]],
+        [[-0.038, 0.698, 0.018], [0.038, 0.698, 0.018], [0.038, -0.698, 0.018],
+         [-0.038, -0.698, 0.018]]], float)
+    tube = np.array([[[-0.02, -0.65, 0.0], [-0.02, 0.65, 0.0], [0.02, 0.65, 0.0],
+                      [0.02, -0.65, 0.0]]])
+    side = 20.0
+    floor = np.array([[[-side / 2, -side / 2, -3.46], [side / 2, -side / 2, -3.46],
+                       [side / 2, side / 2, -3.46], [-side / 2, side / 2, -3.46]]])
+    return _assemble([(trough, 0.8, 0.0, -1, True, 0),
+                      (tube, 0.5, (556.5, 552.7, 504.1), 0, True, 1),
+                      (floor, 0.5, 0.0, -1, True, 2)], lamp_names=["tube"])
