@@ -310,13 +310,9 @@ def _confirm_visibility(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, 
     if occluder is None or links.n == 0 or q.confirm_rays <= 0:
         return links
     r, s = links.receiver, links.source
-    room = h.area[r] / 4 >= SHADOW_AREA_FACTOR * min_area
-    if q.spread_rays and not q.jitter_origins:
-        # and where the final rays of a close link spread (_unresolved_shadows) if partial
-        room |= _close(h, h.radius(), r, s)
     check = ((links.vis != PARTIAL)
              & (rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
-             & room)
+             & (h.area[r] / 4 >= SHADOW_AREA_FACTOR * min_area))
     if not check.any():
         return links
     idx = np.flatnonzero(check)
@@ -514,7 +510,8 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
 
     report(0.7, f"Form factors and visibility for {kept.n} links")
     receiver, source = kept.receiver, kept.source
-    spread_links = _unresolved_shadows(h, kept, b_est, b_scale, rho_max, q, min_area)
+    spread_links = _unresolved_shadows(h, kept, b_est, b_scale, rho_max, q, min_area, occluder,
+                                       seed, scale, timer)
     del kept                            # the oracle's estimates: 77 B a link
     give_back_memory()
     with timer("final_links"):
@@ -635,21 +632,32 @@ def _fixed_origin_leaves(h, contacts, q):
     return crossed_leaves(h, *contacts)
 
 
-def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area):
+def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area,
+                        occluder, seed, scale, timer):
     """(n,) bool: the links whose near pairs' rays leave from spots spread over the leaf
-    (``q.spread_rays``; None when the preset spreads every near pair or none): partly visible
-    (the oracle's rays), bright enough for the BFV criterion (_oracle's ``shadow``), close to
-    their receiver, whose area leaves no room to refine the shadow.  There a few fixed points
-    judge a visibility that varies across the leaf: RenderPark's classroom's reflectors, one
-    leaf each at medium, read their partner, a third of it hidden by the tube between them,
-    20 % bright (seen free from all four points)."""
-    if not q.spread_rays or q.jitter_origins or links.n == 0:
+    (``q.spread_rays``; None when the preset spreads every near pair or none): bright enough
+    for the BFV criterion (_oracle's ``shadow``), close to their receiver, whose area leaves no
+    room to refine a shadow, and partly visible to the oracle's rays, or to confirm_rays x
+    as many more where those all agreed (like _confirm_visibility's, which skips such links:
+    8 rays saw all of a reflector's partner free on two seeds of three).  There a few fixed
+    points judge a visibility that varies across the leaf: RenderPark's classroom's
+    reflectors, one leaf each at medium, read their partner, a sixth of it hidden by the tube
+    between them, 20 % bright (no ray from the four points met the tube)."""
+    if not q.spread_rays or q.jitter_origins or links.n == 0 or occluder is None:
         return None
     r, s = links.receiver, links.source
-    return ((links.vis == PARTIAL)
-            & (rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
-            & (h.area[r] / 4 < SHADOW_AREA_FACTOR * min_area)
-            & _close(h, h.radius(), r, s))
+    spread = ((rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
+              & (h.area[r] / 4 < SHADOW_AREA_FACTOR * min_area)
+              & _close(h, h.radius(), r, s))
+    check = np.flatnonzero(spread & (links.vis != PARTIAL))
+    spread &= links.vis == PARTIAL
+    if len(check) and q.confirm_rays > 0:
+        rng = np.random.default_rng([int(seed), 0x5B4E])   # its own stream: the rest unchanged
+        _, _, free, partial, _ = oracle_estimates(h, r[check], s[check], occluder,
+                                                  q.confirm_rays * q.oracle_rays, rng, scale,
+                                                  timer)
+        spread[check] = partial | ((free > 0) & (free < 1))
+    return spread
 
 
 def _expose(h, system, gather, occluder, seed, scale, scene, q):
