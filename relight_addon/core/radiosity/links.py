@@ -420,7 +420,8 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     hides a different part of the source from each spot, and a few fixed points see under it
     (RenderPark's classroom: the reflectors read their partner 19 % bright at 2 x 2 points).
     Without ``jitter``, the near leaves of the links ``spread_links`` (n,) bool alone are cast
-    so, ``spread_rays`` rays a leaf at least: shadows the refinement could not resolve.
+    so; either way theirs take ``spread_rays`` rays a leaf at least: shadows the refinement
+    could not resolve.
     Except on the leaves ``fixed`` (h.n,) bool: those crossed by a contact line, whose exposure
     (radiosity.exposure) is judged on the points, so their rays too must leave from there.
     With ``with_leaves`` also returns the per-leaf values (a LeafGather): gathering with them,
@@ -461,7 +462,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     leaf_slot = np.full(h.n, -1, np.int64)
     leaf_slot[leaves] = np.arange(len(leaves))
     mm = m * m
-    if spread_links is not None and not jitter and not spread_links.any():
+    if spread_links is not None and not spread_links.any():
         spread_links = None
     if jitter or spread_links is not None:    # the Gauss cells along u and v: [lo, lo + width)
         lo, width = gauss_cells(m)
@@ -525,8 +526,9 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         else:
             per_pt = np.maximum(1, -(-rays // np.maximum(points_per_link, 1)))  # ceil, per link
             ray_count = per_pt[link_pt]
-            if spread_links is not None and not jitter:
-                ray_count[spread] = np.maximum(ray_count[spread], -(-spread_rays // mm))
+            if spread_links is not None:
+                boost = spread & spread_links[links][link_pt]
+                ray_count[boost] = np.maximum(ray_count[boost], -(-spread_rays // mm))
             recv_of_pt = lr[link_pt]
             # The rays of one point follow an R2 low-discrepancy sequence with a random shift
             # (Cranley-Patterson), so few rays still cover the source evenly.

@@ -643,7 +643,7 @@ def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, 
     points judge a visibility that varies across the leaf: RenderPark's classroom's
     reflectors, one leaf each at medium, read their partner, a sixth of it hidden by the tube
     between them, 20 % bright (no ray from the four points met the tube)."""
-    if not q.spread_rays or q.jitter_origins or links.n == 0 or occluder is None:
+    if not q.spread_rays or links.n == 0 or occluder is None:
         return None
     r, s = links.receiver, links.source
     spread = ((rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)

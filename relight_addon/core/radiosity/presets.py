@@ -92,15 +92,24 @@ class Quality:
     # (Rays added after a first look are biased towards what the first rays saw: a link they
     # all saw free keeps V = 1)
     partial_rays: int = 0
-    # without ``jitter_origins``: the near pairs of shadows the refinement had no room to
-    # resolve (precompute._unresolved_shadows) cast this many rays a leaf from spots spread over
-    # it.  Medium: 256.  RenderPark's classroom's reflectors (one leaf each at medium) read the
+    # the near pairs of shadows the refinement had no room to resolve (bright, partly visible
+    # links whose receiver is too small to split: precompute._unresolved_shadows) cast this
+    # many rays a leaf, from spots spread over it (with or without ``jitter_origins``).
+    # Medium: 256.  RenderPark's classroom's reflectors (one leaf each at medium) read the
     # reflector facing them, a sixth of it hidden by the tube between them, 20 % bright from
     # 2 x 2 fixed points (no ray met the tube): the patches near the lamps came out 1.0-2.1 %
-    # bright on every seed, 1.76 / 3.33 % mean / max on seed 1, draft 1.60 / 4.71 %; with
-    # 256: 0.49 / 1.38 % (-0.3 % bias), the largest patches 0.47 / 1.17 -> 0.63 / 1.12 %,
-    # 213 -> 206 s.  (128 on one fixture over a floor, 16 seeds: the reflectors' +3.0 % bias
-    # gone, their spread over seeds 0.9-1.2 -> 1.2-2.1 %; 256: 0.9-1.8 %)
+    # bright on every seed, medium less accurate than draft on seed 1.  With 256, over seeds
+    # 1-4 against Mitsuba 3: near the lamps 1.76-2.28 / 2.89-5.35 -> 0.30-0.60 / 0.70-2.07 %
+    # mean / max (bias -0.33-+0.06 %); the largest patches 0.47-0.79 / 1.17-2.50 -> 0.61-0.85 /
+    # 1.71-2.23 % (the room 0.4-0.8 % dark: the reflectors' excess light had hidden it); the
+    # Cornell box over seeds 0-4 0.62-0.70 / 1.52-2.21 -> 0.55-0.62 / 1.17-1.63 %; the
+    # classroom's solve alone 213 -> 206 s (seed 1, a first version confirming inside the
+    # refinement).  High and ultra: 1024 (their reflectors are four leaves; their spread
+    # origins took 32-64 rays a link): the classroom's seed 4 near the lamps 0.47 / 1.38 ->
+    # 0.19 / 0.40 % (high had fallen behind medium's new 0.30 / 0.70 there), the largest
+    # patches 0.26 / 0.60 -> 0.27 / 0.74 %; the Cornell box over seeds 0-4 at high
+    # 0.33-0.36 / 0.90-1.02 -> 0.31-0.34 / 0.90-1.01 %, the fixture of
+    # scenes.testscenes.ceiling_fixture over 16 seeds: its reflectors' spread 0.3-0.4 -> 0.1 %
     spread_rays: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
@@ -136,13 +145,14 @@ PRESETS = {
     "high": Quality("high", eps_bf=0.002, eps_bfv=0.001, min_area=8e-5, quadrature=2, rays=32,
                     oracle_rays=8, separation=0.25, confirm_rays=4,
                     split_levels=3, split_near=0.15, ff_quadrature=3, jitter_origins=True,
-                    partial_rays=64),
+                    partial_rays=64, spread_rays=1024),
     # ultra with high's spread origins and 128 rays on partly blocked links: on the Cornell
     # box over seeds 0-4 without them it fell behind high (0.35-0.37 / 0.99-1.30 % against
     # high's 0.33-0.36 / 0.90-1.02 %), with them 0.24-0.26 / 0.88-0.91 %
     "ultra": Quality("ultra", eps_bf=0.0007, eps_bfv=0.0003, min_area=2e-5, quadrature=3,
                      rays=32, oracle_rays=8, separation=0.15, confirm_rays=4,
-                     split_levels=3, split_near=0.1, jitter_origins=True, partial_rays=128),
+                     split_levels=3, split_near=0.1, jitter_origins=True, partial_rays=128,
+                     spread_rays=1024),
 }
 
 
