@@ -468,7 +468,12 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
         lo, width = gauss_cells(m)
 
     pts_per_link = count[r] * mm
-    link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(pts_per_link) // _CHUNK_POINTS)) + 1)
+    # chunks of about equal rays: a spread link's points cast spread_rays / rays times as many
+    # (kept whole, a chunk's free rays held RenderPark's classroom at high 430 MB over)
+    work = pts_per_link.astype(float)
+    if spread_links is not None and spread_rays > rays > 0:
+        work[spread_links] *= spread_rays / rays
+    link_chunks = np.split(np.arange(n), np.flatnonzero(np.diff(np.cumsum(work) // _CHUNK_POINTS)) + 1)
 
     # A leaf far from every source it gathers from (relative to its size) needs one point: F is
     # smooth there.  The leaf's points (and their rays) are the same for all its sources, so
