@@ -31,8 +31,8 @@ from .gather_rows import GatherRows
 from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .memory import give_back_memory
-from .links import (PARTIAL, _close, LinkSet, facing, final_form_factors, initial_pairs, oracle_estimates,
-                    visibility_types)
+from .links import (PARTIAL, LinkSet, _close, facing, final_form_factors, initial_pairs,
+                    oracle_estimates, visibility_types)
 from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
 
@@ -634,8 +634,8 @@ def _fixed_origin_leaves(h, contacts, q):
 
 def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area,
                         occluder, seed, scale, timer, contacts):
-    """(n,) bool: the links whose near pairs' rays leave from spots spread over the leaf
-    (``q.spread_rays``; None when the preset spreads every near pair or none): bright enough
+    """(n,) bool: the links whose near pairs cast ``q.spread_rays`` rays a leaf from spots
+    spread over it (links.final_form_factors; None when the preset has none): bright enough
     for the BFV criterion (_oracle's ``shadow``), close to their receiver, whose area leaves no
     room to refine a shadow, and partly visible to the oracle's rays, or to confirm_rays x
     as many more where those all agreed (like _confirm_visibility's, which skips such links:
