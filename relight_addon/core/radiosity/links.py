@@ -323,7 +323,7 @@ def _hovering(h, radius, leaf, source):
     """(n,) bool per (leaf, source) pair: the source is near the leaf (its radius above
     _HOVER_GAP x the gap) and comes closer to the leaf's plane than _HOVER_HEIGHT x the leaf's
     radius without touching it."""
-    near = _close(h, radius, leaf, source, _HOVER_GAP)
+    near = close_pairs(h, radius, leaf, source, _HOVER_GAP)
     lowest = np.abs(_heights(h, leaf[near], source[near])).min(axis=1)
     r = radius[leaf[near]]
     near[near] = (lowest > _TOUCHING * 2 * r) & (lowest < _HOVER_HEIGHT * r)
@@ -336,7 +336,7 @@ def _edge_contact_points(h, radius, leaf, source):
     at an edge at most: a box side crossing the leaf is not one), the count its centre's height
     calls for (_CONTACT_POINTS); 0 elsewhere."""
     points = np.zeros(len(leaf), np.int64)
-    near = np.flatnonzero(_close(h, radius, leaf, source, 1.0))   # within the leaf's reach
+    near = np.flatnonzero(close_pairs(h, radius, leaf, source, 1.0))   # within the leaf's reach
     lf, src = leaf[near], source[near]
     r = radius[lf]
     height = _heights(h, lf, src)
@@ -351,7 +351,7 @@ def _edge_contact_points(h, radius, leaf, source):
     return points
 
 
-def _close(h, radius, leaf, source, ratio=_FAR_RATIO):
+def close_pairs(h, radius, leaf, source, ratio=_FAR_RATIO):
     """(n,) bool per (leaf, source) pair: the leaf's radius is above ``ratio`` x its gap to the
     source (F varies over the leaf: it needs its quadrature points)."""
     gap = np.linalg.norm(h.centroid[leaf] - h.centroid[source], axis=1) - radius[source]
@@ -370,7 +370,7 @@ def _pair_form_factors(h, P, lr, ls, link_of, leaf_ids, near_pairs, far_pairs, s
     source stands on the leaf's edge over as many as it calls for (_edge_contact_points)."""
     nn = len(near_pairs) * mm
     pair_src, pair_recv = ls[link_of], lr[link_of]
-    close = _close(h, radius, leaf_ids[near_pairs], pair_src[near_pairs], _CENTRE_RATIO)
+    close = close_pairs(h, radius, leaf_ids[near_pairs], pair_src[near_pairs], _CENTRE_RATIO)
     on_points = near_pairs[close]                                # then one value a pair:
     at_centre = np.concatenate([near_pairs[~close], far_pairs])  # near leaves', far leaves'
     point_of = (np.flatnonzero(close)[:, None] * mm + np.arange(mm)).ravel()
@@ -483,7 +483,7 @@ def final_form_factors(h: Hierarchy, r, s, occluder, m: int, rays: int, rng, sca
     for links in link_chunks:
         lr, ls = r[links], s[links]
         leaf_ids = leaf_of[_segment_ranges(first[lr], count[lr])]
-        leaf_near[leaf_ids[_close(h, radius, leaf_ids, np.repeat(ls, count[lr]))]] = True
+        leaf_near[leaf_ids[close_pairs(h, radius, leaf_ids, np.repeat(ls, count[lr]))]] = True
 
     # The (link, leaf) pairs' entries are written in place, chunk by chunk (each chunk's are a
     # known range): kept as chunks' arrays and joined they doubled the office's peak.  The rays'

@@ -31,7 +31,7 @@ from .gather_rows import GatherRows
 from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .memory import give_back_memory
-from .links import (PARTIAL, LinkSet, _close, facing, final_form_factors, initial_pairs,
+from .links import (PARTIAL, LinkSet, close_pairs, facing, final_form_factors, initial_pairs,
                     oracle_estimates, visibility_types)
 from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
@@ -653,15 +653,14 @@ def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, 
     r, s = links.receiver, links.source
     spread = ((rho_max[h.patch[r]] * b_est[s] * links.F > q.eps_bfv * b_scale)
               & (h.area[r] / 4 < SHADOW_AREA_FACTOR * min_area)
-              & _close(h, h.radius(), r, s))
+              & close_pairs(h, h.radius(), r, s))
     check = np.flatnonzero(spread & (links.vis != PARTIAL))
     spread &= links.vis == PARTIAL
     if len(check) and q.confirm_rays > 0:
         rng = np.random.default_rng([int(seed), 0x5B4E])   # its own stream: the rest unchanged
-        _, _, free, partial, _ = oracle_estimates(h, r[check], s[check], occluder,
-                                                  q.confirm_rays * q.oracle_rays, rng, scale,
-                                                  timer)
-        spread[check] = partial | ((free > 0) & (free < 1))
+        _, _, _, partial, _ = oracle_estimates(h, r[check], s[check], occluder,
+                                               q.confirm_rays * q.oracle_rays, rng, scale, timer)
+        spread[check] = partial
     return spread
 
 
