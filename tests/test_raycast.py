@@ -336,3 +336,16 @@ def test_first_hit_names_the_nearest_triangle(backend, random_scene):
                                atol=1e-5)
     np.testing.assert_array_equal(rc.make_occluder(tris, backend).first_hit_distance(
         o[:m], d)[same], t[same])
+
+
+def test_a_scenes_size_is_its_bounding_box_and_never_zero():
+    """Ray offsets and matching grids scale with the scene (core/geometry/extent.py): a box of
+    sides 1, 2, 2 turned into quads' corners, then the degenerate cases that must not give a
+    zero tolerance."""
+    from relight_addon.core.geometry.extent import bounding_diagonal, longest_side
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [1, 2, 0], [0, 2, 0]],
+                        [[0, 0, 2], [1, 0, 2], [1, 2, 2], [0, 2, 2]]], float) - 5.0
+    assert bounding_diagonal(corners) == pytest.approx(3.0)
+    assert longest_side(corners) == pytest.approx(2.0)
+    for none in (np.zeros((0, 4, 3)), np.ones((1, 3))):
+        assert bounding_diagonal(none) == 1.0 and longest_side(none) == 1.0

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry.extent import longest_side
+
 # Relative tolerance (to the patch size) above which a quad counts as non-planar and is split.
 PLANARITY_TOLERANCE = 1e-4
 # Faces with an area below this fraction of the mean face area are dropped as degenerate.
@@ -196,7 +198,7 @@ class SceneData:
         if self.n_patches < 2:
             return
         _, normal = quad_area_normal(self.corners)
-        size = float(np.ptp(self.corners.reshape(-1, 3), axis=0).max()) or 1.0
+        size = longest_side(self.corners)
         key = np.round(np.sort(self.corners.reshape(-1, 4, 3), axis=1) / (1e-9 * size)).reshape(-1, 12)
         key = np.concatenate([key, np.round(normal * 1e6)], axis=1)
         _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.extent import longest_side
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import cosine_directions
 
@@ -50,7 +51,7 @@ def back_copies(scene):
     from scipy.spatial import cKDTree
     centre = np.concatenate([scene.corners.min(axis=1), scene.corners.max(axis=1)], axis=1)
     _, normal = scene.area_normal()
-    size = float(np.ptp(scene.corners.reshape(-1, 3), axis=0).max()) or 1.0
+    size = longest_side(scene.corners)
     fronts = np.flatnonzero(scene.occluder)
     if not len(fronts):
         return out

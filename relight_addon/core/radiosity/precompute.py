@@ -18,6 +18,7 @@ from functools import partial
 
 import numpy as np
 
+from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
@@ -379,8 +380,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             raise Cancelled(msg)
 
     with timer("setup"):
-        lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
-        scale = float(np.linalg.norm(hi - lo)) or 1.0
+        scale = bounding_diagonal(scene.corners)
         if occluder == "auto":
             occluder = scene.make_occluder()
         if occluder is not None:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..geometry.extent import bounding_diagonal
 from ..scene import SceneData, quad_area_normal
 
 CANDIDATES = 12         # nearest sample points whose triangles are tested first
@@ -116,8 +117,7 @@ def build_proxy(scene: SceneData, faces: int, back_of=None) -> Proxy:
     t0 = time.perf_counter()
     back_of = np.zeros(0, np.int64) if back_of is None else np.asarray(back_of, np.int64)
     fronts = scene.n_patches - len(back_of)
-    lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
-    scale = float(np.linalg.norm(hi - lo)) or 1.0
+    scale = bounding_diagonal(scene.corners)
     lamp = scene.lamp >= 0
     surf = np.flatnonzero(~lamp[:fronts])
     tris_in = _triangles(scene.corners[surf])

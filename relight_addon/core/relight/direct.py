@@ -18,6 +18,7 @@ import numpy as np
 from ..geometry.sampling import R2, area_uniform_uv
 from ..lights import light_irradiance
 from ..geometry.formfactor import point_kernel, point_to_polygon
+from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
 from ..scene import SceneData, bilinear_point, quad_area_normal
 
@@ -76,8 +77,7 @@ def lamp_irradiance(scene: SceneData, points, normals, occluder=None, rays: int 
     if n == 0:
         return unocc, occ
     scale_k = np.ones(k) if exitance_scale is None else np.asarray(exitance_scale, float)
-    lo, hi = scene.corners.reshape(-1, 3).min(0), scene.corners.reshape(-1, 3).max(0)
-    size = float(np.linalg.norm(hi - lo))
+    size = bounding_diagonal(scene.corners)
     eps = max(ray_offset(size), offset)        # ``offset``: a rough surface's bumps (proxy.py)
     rng = np.random.default_rng(seed)
     if len(scene.lights):

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
 from ..scene import SceneData, bilinear_point
 from ..texture.colour import luminance
@@ -84,7 +85,7 @@ def side_evidence(scene: SceneData, occluder, patches, seed=0):
     rays at once held 620 MB (benchmarks/results/scan.md)."""
     rng = np.random.default_rng(seed)
     _, normal = scene.area_normal()
-    size = float(np.linalg.norm(np.ptp(scene.corners.reshape(-1, 3), axis=0)))
+    size = bounding_diagonal(scene.corners)
     eps = ray_offset(size)
     patches = np.asarray(patches)
     lit = np.zeros((len(patches), 2))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
 from ..texture.colour import lab_distance, luminance
 from ..texture.mapping import element_means, neighbour_element_pairs
@@ -29,7 +30,7 @@ def camera_visible(sol, leaves, occluder):
     facing = np.einsum("ij,ij->i", d, h.normal[leaves]) > 0
     if occluder is None:
         return facing
-    eps = ray_offset(np.linalg.norm(np.ptp(h.corners[: sol.scene.n_patches].reshape(-1, 3), 0)))
+    eps = ray_offset(bounding_diagonal(h.corners[: sol.scene.n_patches]))
     blocked = occluder.segments_occluded(c + eps * h.normal[leaves], np.broadcast_to(vp, c.shape))
     return facing & ~blocked
 

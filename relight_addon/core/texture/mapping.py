@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry.extent import longest_side
+
 # Tolerance (in patch parameter units) for a texel centre lying exactly on a patch edge.
 INSIDE_TOLERANCE = 1e-9
 # Candidate (patch, texel) pairs processed at once (peak ~40 MB of temporaries); besides the
@@ -594,8 +596,7 @@ def vertex_values(hierarchy, leaf_values, across_patches: bool = False, tol: flo
     nl = len(leaves)
     if across_patches:
         corners = hierarchy.corners[leaves]                     # (nl, 4, 3)
-        allc = hierarchy.corners[: hierarchy.n].reshape(-1, 3)
-        size = max(float(np.ptp(allc, axis=0).max()) if len(allc) else 1.0, 1e-300)
+        size = longest_side(hierarchy.corners[: hierarchy.n])
         q = np.rint(corners / (tol * size)).astype(np.int64)
         nq = np.rint(hierarchy.normal[leaves] * 1e3).astype(np.int64)  # ~0.06 degree bins
         nq = np.broadcast_to(nq[:, None, :], (nl, 4, 3))
