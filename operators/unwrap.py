@@ -70,7 +70,7 @@ def atlas_loop_uvs(mesh, matrix_world):
         loop_vert = np.empty(len(mesh.loops), np.int32)
         mesh.loops.foreach_get("vertex_index", loop_vert)
         polys, first_tri = np.unique(tri_poly, return_index=True)   # tri_poly is sorted
-        tl, tv = tri_loops.reshape(nt, 3), tri_verts.reshape(nt, 3)
+        tv = tri_verts.reshape(nt, 3)
         for pi in np.flatnonzero(bad):
             t = first_tri[np.searchsorted(polys, pi)]
             p = world[tv[t]].astype(np.float64)
