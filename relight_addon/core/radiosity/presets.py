@@ -95,23 +95,16 @@ class Quality:
     # the near pairs of shadows the refinement had no room to resolve (bright, partly visible
     # links whose receiver is too small to split: precompute._unresolved_shadows) cast this
     # many rays a leaf, from spots spread over it (with or without ``jitter_origins``).
-    # Medium: 1024 (measured below at 256, where a clutter furnace's leaf beside a panel 1 mm
-    # away read 1.05 % off, its row 0.989: the kernel-weighted ratio's bias next to the gap;
-    # 0.17 % with 1024, 0.12 % with fixed points).  RenderPark's classroom's reflectors (one leaf each at medium) read the
-    # reflector facing them, a sixth of it hidden by the tube between them, 20 % bright from
-    # 2 x 2 fixed points (no ray met the tube): the patches near the lamps came out 1.0-2.1 %
-    # bright on every seed, medium less accurate than draft on seed 1.  With 256, over seeds
-    # 1-4 against Mitsuba 3: near the lamps 1.76-2.28 / 2.89-5.35 -> 0.30-0.60 / 0.70-2.07 %
-    # mean / max (bias -0.33-+0.06 %); the largest patches 0.47-0.79 / 1.17-2.50 -> 0.61-0.85 /
-    # 1.71-2.23 % (the room 0.4-0.8 % dark: the reflectors' excess light had hidden it); the
-    # Cornell box over seeds 0-4 0.62-0.70 / 1.52-2.21 -> 0.55-0.62 / 1.17-1.63 %; the
-    # classroom's solve alone 213 -> 206 s (seed 1, a first version confirming inside the
-    # refinement).  High and ultra: 1024 (their reflectors are four leaves; their spread
-    # origins took 32-64 rays a link): the classroom's seed 4 near the lamps 0.47 / 1.38 ->
-    # 0.19 / 0.40 % (high had fallen behind medium's new 0.30 / 0.70 there), the largest
-    # patches 0.26 / 0.60 -> 0.27 / 0.74 %; the Cornell box over seeds 0-4 at high
-    # 0.33-0.36 / 0.90-1.02 -> 0.31-0.34 / 0.90-1.01 %, the fixture of
-    # scenes.testscenes.ceiling_fixture over 16 seeds: its reflectors' spread 0.3-0.4 -> 0.1 %
+    # Why: RenderPark's classroom's reflectors (one leaf each at medium) read the reflector
+    # facing them, a sixth of it hidden by the tube between them, 20 % bright from 2 x 2 fixed
+    # points (no ray met the tube), so the patches near its lamps came out 1.0-2.1 % bright on
+    # every seed.  With 1024 spread rays, over seeds 0-4 against Mitsuba 3 (mean / max %,
+    # results/mgf_classroom_seeds.md, cornell.md): the classroom near the lamps at medium
+    # 1.76-2.28 / 2.89-5.35 (seeds 1-4) -> 0.26-0.34 / 0.66-1.05, at high 0.17-0.24 / 0.34-0.57
+    # (its seed 4 0.47 / 1.38 before); the Cornell box at medium 0.62-0.70 / 1.52-2.21 ->
+    # 0.53-0.67 / 1.39-2.97, for 40 % more time there.  256 instead of 1024 at medium: a clutter
+    # furnace's leaf beside a panel 1 mm away read 1.05 % off (the kernel-weighted ratio's bias
+    # next to the gap), 0.17 % with 1024.
     spread_rays: int = 0
     solver: str = "gmres"
     tol: float = 1e-8
