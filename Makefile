@@ -1,6 +1,7 @@
 # Relight: developer commands. See README.md.
 #
 #   make test        create .venv on first use (bpy wheel + runtime + test deps), run pytest
+#   make test-quick  the tests not marked slow (under 5 minutes)
 #   make demo        solve the embedded Cornell box (out/cornell.png), then relight the photographed
 #                    office through the operator (EEVEE frames, Cycles truth, out/demo_side_by_side.png,
 #                    out/demo.blend; copy in benchmarks/results/demo_office.png)
@@ -28,10 +29,14 @@ REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
 STAMP     := $(VENV)/.requirements-stamp
 STAMP_LTS := $(LTS)/.requirements-stamp
 
-.PHONY: test demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
+.PHONY: test test-quick demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
+
+# the tests not marked slow (conftest.py): under 5 minutes, between edits
+test-quick: $(STAMP)
+	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) -m "not slow" tests
 
 demo: $(STAMP)
 	$(VENV)/bin/python -m demo.cornell

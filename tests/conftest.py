@@ -19,6 +19,12 @@ LONGEST_FIRST = ("test_proxy.py", "test_clutter_furnace.py", "test_shadowfree.py
                  "test_data_safety.py", "test_office_bakes.py")
 
 
+def pytest_configure(config):
+    # `make test-quick` runs `-m "not slow"`: what a developer runs between edits (< 5 min)
+    config.addinivalue_line("markers", "slow: Cycles bakes and renders, scans, EEVEE, long "
+                                       "solves (left out of `make test-quick`)")
+
+
 def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
