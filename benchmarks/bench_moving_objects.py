@@ -130,52 +130,6 @@ def _pixels(img):
     return buf.reshape(img.size[1], img.size[0], -1)
 
 
-def emit_bake(bpy, names, materials=None):
-    """{object: (H, W, 3)} Cycles EMIT bake (1 sample) of each object's first material (or of
-    ``materials[name]``, assigned for the bake) at the size of its texture."""
-    scene = bpy.context.scene
-    cy = scene.cycles
-    saved = (scene.render.engine, cy.device, cy.samples, cy.use_adaptive_sampling)
-    scene.render.engine = "CYCLES"
-    cy.device, cy.samples, cy.use_adaptive_sampling = "CPU", 1, False
-    vl = bpy.context.view_layer
-    for o in vl.objects:
-        o.select_set(False)
-    made = []
-    try:
-        for name in names:
-            obj = bpy.data.objects[name]
-            relit = obj.material_slots[0].material
-            size = relit.node_tree.nodes["T"].image.size if "T" in relit.node_tree.nodes else \
-                (48, 48)
-            mat = relit
-            if materials is not None:
-                mat = materials[name]
-                obj.material_slots[0].material = mat
-            img = bpy.data.images.new(f"__bench_emit_{name}", size[0], size[1], float_buffer=True)
-            img.colorspace_settings.name = "Linear Rec.709"
-            node = mat.node_tree.nodes.new("ShaderNodeTexImage")
-            node.image = img
-            prev = mat.node_tree.nodes.active
-            mat.node_tree.nodes.active = node
-            made.append((obj, relit, mat, node, img, prev))
-            obj.select_set(True)
-            vl.objects.active = obj
-        assert bpy.ops.object.bake(type="EMIT", margin=2, use_clear=True,
-                                   target="IMAGE_TEXTURES") == {"FINISHED"}
-        return {obj.name: _pixels(img)[..., :3].astype(np.float64).copy()
-                for obj, _, _, _, img, _ in made}
-    finally:
-        for obj, relit, mat, node, img, prev in made:
-            mat.node_tree.nodes.remove(node)
-            if prev is not None:
-                mat.node_tree.nodes.active = prev
-            bpy.data.images.remove(img)
-            obj.material_slots[0].material = relit
-            obj.select_set(False)
-        scene.render.engine, cy.device, cy.samples, cy.use_adaptive_sampling = saved
-
-
 def relit_from_images(bpy, names, shadow=None):
     """{object: T x sum_k I_k M_k [x (1 - a_k (1 - V_k))]} from the written images and the
     drivers' values (tests/test_virtual_lamps.py ``_relit``); ``shadow[name][lamp]`` = V_k per
@@ -446,15 +400,13 @@ def main(argv=None):
 
     from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
     from scenes.addon import register_repo_addon
-    from scenes.bake import LAST_BAKE, bake_lighting, coverage_masks
+    from scenes.bake import LAST_BAKE, bake_lighting, coverage_masks, emit_bake
     from scenes.office import build_office
     from demo.office import make_photographed
     register_repo_addon()
     import importlib
     sn = importlib.import_module(PKG + ".relight_addon.blender.sphere_nodes")
-    ops = importlib.import_module(PKG + ".operators.precompute")
-    settings = importlib.import_module(PKG + ".operators.settings")
-    fingerprint = importlib.import_module(PKG + ".relight_addon.core.scene").scene_fingerprint
+    pipeline = importlib.import_module(PKG + ".relight_addon.blender.pipeline")
     wrap = Wrapped(sn)
     tmp = tempfile.mkdtemp(prefix="relight_bench_moving_")
 
@@ -495,8 +447,10 @@ def main(argv=None):
 
     def up_to_date():
         """Would Update take its fast path (the scene's fingerprint as stored)?"""
-        data, _, err = ops.read_for_precompute(bpy.context)
-        return err is None and fingerprint(data) == settings.status(scene).get("fingerprint")
+        try:
+            return pipeline.prepare(bpy.context, "update").action == "none"
+        except pipeline.PipelineError:
+            return False
 
     def unwire():
         """Objects 'ignored' and sphere_nodes.sync: the groups go, the materials are unwired."""

@@ -155,7 +155,7 @@ def main(argv=None):
     from scenes.bake import bake_lighting
     from scenes.office import build_office
     register_repo_addon()
-    settings = importlib.import_module(bmo.PKG + ".operators.settings")
+    settings = importlib.import_module(bmo.PKG + ".relight_addon.blender.state")
     tmp = tempfile.mkdtemp(prefix="relight_bench_appearance_")
 
     def de(x, y, white):

@@ -8,7 +8,8 @@ class RelightOperator:
 
     @classmethod
     def poll(cls, context):
-        reason = cls.disabled_reason(context)
+        reason = "No active scene" if getattr(context, "scene", None) is None else \
+            cls.disabled_reason(context)
         if reason:
             cls.poll_message_set(reason)
             return False
@@ -16,7 +17,5 @@ class RelightOperator:
 
     @classmethod
     def disabled_reason(cls, context):
-        """A sentence saying why the operator cannot run now, or None."""
-        if getattr(context, "scene", None) is None:
-            return "No active scene"
+        """A sentence saying why the operator cannot run now (the scene exists), or None."""
         return None

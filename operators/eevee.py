@@ -5,12 +5,21 @@ virtual objects with the relit surfaces as Cycles does (relight_addon/blender/ee
 import bpy
 
 from .base import RelightOperator
-from .settings import last_result, status
 
 
 def _modules():
     from ..relight_addon.blender import eevee_probe, write
     return eevee_probe, write
+
+
+def status(scene):
+    from ..relight_addon.blender import state
+    return state.status(scene)
+
+
+def last_result(scene):
+    from ..relight_addon.blender import state
+    return state.last_result(scene)
 
 
 class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
@@ -30,9 +39,6 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
 
     @classmethod
     def disabled_reason(cls, context):
-        reason = super().disabled_reason(context)
-        if reason:
-            return reason
         _, write = _modules()
         if not status(context.scene) or not write.has_relight_data(context.scene):
             return "Run Precompute first: there is no relit room to light objects with"

@@ -14,59 +14,51 @@ import math
 import bpy
 
 from .base import RelightOperator
-from .settings import STATUS, status
-
-POWER0 = "relight_power0"
-
-
-def _power_drivers(light_data):
-    """(driver, its variable's name) of generated materials' drivers that read
-    ``light_data.energy`` (not its colour: those keep their own expression)."""
-    for mat in bpy.data.materials:
-        if not mat.get("relight_generated") or mat.node_tree is None:
-            continue
-        ad = mat.node_tree.animation_data
-        for fc in (ad.drivers if ad else []):
-            for var in fc.driver.variables:
-                t = var.targets[0]
-                if t.id == light_data and t.data_path == "energy":
-                    yield fc, var.name
 
 
 def match_lamp_powers(scene):
-    """Returns (changed names, warnings)."""
-    st = status(scene)
+    """Returns (changed labels, warnings)."""
+    from ..relight_addon.blender import eevee_probe, ids, state
+    from ..relight_addon.blender.drivers import drivers_reading, ratio_expression
+    st = state.status(scene)
     if not st or not st.get("exitance_scale"):
         return [], ["Run Precompute first: there is no exitance estimate"]
+    records = state.lamp_records(scene)
     changed, warnings = [], []
-    for name, s in zip(st["lamps"], st["exitance_scale"]):
-        obj = bpy.data.objects.get(name)
-        if obj is None or obj.type != "LIGHT":
+    for r, s in zip(records, st["exitance_scale"]):
+        name = r["label"]
+        obj = state.find_light(scene, r) if r.get("kind", "light") == "light" else None
+        if obj is None:
             warnings.append(f"'{name}' is not a light object: left alone")
             continue
         light = obj.data
         if light.library is not None or getattr(light, "override_library", None) is not None:
             warnings.append(f"Light '{name}' is linked from a library: left alone")
             continue
-        p0 = float(light.get(POWER0, light.energy))
+        # the power its map was computed at: the record's, never the light's present power
+        p0 = float(r["p0"])
         new = p0 * math.pi * float(s)
         if not math.isfinite(new) or new <= 0:
             warnings.append(f"Lamp '{name}': no usable estimate ({s!r}); left alone")
             continue
         light.energy = new
-        light[POWER0] = new
-        for fc, var in _power_drivers(light):
-            fc.driver.expression = f"{var} / {new!r}"
+        light[ids.POWER0] = new
+        for mat in bpy.data.materials:
+            if ids.is_generated(mat) and mat.node_tree is not None:
+                for fc, var in drivers_reading(mat.node_tree, light, "energy"):
+                    fc.driver.expression = ratio_expression(var, new)
+        # the maps now stand for the lamp at this power, in the photo too
+        r["p0"] = new
+        if not r.get("virtual"):
+            r["photo"] = new if float(r.get("photo", 0.0)) > 0 else 0.0
         changed.append(name)
     if changed:
-        from ..relight_addon.blender import eevee_probe
         probe = eevee_probe.find_volume(scene)
         if probe is not None:      # its driver divides by the old powers
             eevee_probe.drive_intensity(scene, probe.data)
-    st = dict(st)
-    st["exitance_scale"] = [1.0 / math.pi if n in changed else s
-                            for n, s in zip(st["lamps"], st["exitance_scale"])]
-    scene[STATUS] = st
+    state.update_status(scene, lamp_records=records,
+                        exitance_scale=[1.0 / math.pi if r["label"] in changed else s
+                                        for r, s in zip(records, st["exitance_scale"])])
     return changed, warnings
 
 
@@ -80,11 +72,8 @@ class RELIGHT_OT_match_lamp_powers(RelightOperator, bpy.types.Operator):
 
     @classmethod
     def disabled_reason(cls, context):
-        reason = super().disabled_reason(context)
-        if reason:
-            return reason
-        from ..relight_addon.blender import write
-        st = status(context.scene)
+        from ..relight_addon.blender import state, write
+        st = state.status(context.scene)
         if not st or not st.get("exitance_scale") or not write.has_relight_data(context.scene):
             return "Run Precompute first: there is no estimate of the lamps to match"
         return None

@@ -1,24 +1,14 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Per-scene Relight settings (``scene.relight``), the object role, and the state of the last
-precompute.
-
-* The status lives in the scene's ID property ``relight_status`` (a dict), so it is saved with
-  the .blend and follows undo like the relit materials it describes.
-* The last result (the radiosity solution, for Update and the overlays) is kept in memory per
-  scene, tied to the status by a run id: after undo, a reload or another file it is simply not
-  there (``load_post`` forgets every result), never another scene's or file's.
+"""Per-scene Relight settings (``scene.relight``) and the object properties (role, shadows,
+spheres).  What a scene remembers of its last precompute is the bridge's (blender/state.py).
 """
-
-import uuid
 
 import bpy
 from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
+from ..relight_addon.blender.roles import DEFAULT_SPHERES, MAX_SPHERES, ROLE_ITEMS, SHADOW_ITEMS
 from ..relight_addon.core.radiosity.presets import PROXY_FACTOR
-
-STATUS = "relight_status"
-ROLE_PROPERTY = "relight_role"
 
 CORRECTION_ITEMS = (
     ("TEXEL", "Per Texel", "Remove the real lamps' shadows from the textures texel by texel "
@@ -36,22 +26,6 @@ PRESET_ITEMS = (
     ("ultra", "Ultra", "Slowest, most accurate"),
 )
 
-ROLE_ITEMS = (
-    ("relit", "Relit", "A photographed surface: its textures are relit"),
-    ("occluder", "Occluder", "Only casts shadows and blocks light (not relit, reflects nothing)"),
-    ("ignored", "Ignored", "Not read at all"),
-    ("virtual", "Virtual", "A virtual object, not in the photo: it casts shadows on and "
-                           "reflects light onto the relit surfaces (Update after moving it)"),
-)
-
-SHADOW_ITEMS = (
-    ("EXACT", "Exact", "Ray-traced into the maps on Update, with the light the object blocks and "
-                       "reflects; Update after moving it"),
-    ("SPHERES", "Moving", "Soft shadows of a set of spheres, evaluated by the relit materials: "
-                          "they follow the object's animation and drags at once, and render on "
-                          "a farm without the extension (direct light only)"),
-)
-
 OVERLAY_ITEMS = (
     ("NONE", "None", "No overlay"),
     ("RATIO", "B / D", "Radiosity elements coloured by B / D: white where nothing blocks the "
@@ -64,51 +38,8 @@ OVERLAY_ITEMS = (
     ("LINKS", "Links", "The links that carry the most light"),
 )
 
-# scene.session_uid -> [(run id, ShadowFreeResult)], newest last: the last result of each
-# scene in memory, and the one before it while its maps are small enough (an undo of the last
-# Update brings back the status that names it, and the next Update starts from it, not from a
-# new solve).
-_RESULTS = {}
-KEEP_PREVIOUS_BYTES = 256 << 20
-
-
-def _map_bytes(result):
-    return sum(int(getattr(a, "nbytes", 0)) for part in (result.maps, result.texture)
-               for a in (part or {}).values())
-
-
-def last_result(scene):
-    """The result of ``scene``'s last precompute in this session that its status names (Undo
-    of the last Update brings back the one before; reload or Clear make it unavailable)."""
-    st = status(scene)
-    if not st:
-        return None
-    for run, result in reversed(_RESULTS.get(scene.session_uid, ())):
-        if st.get("run") == run:
-            return result
-    return None
-
-
-def remember(scene, result):
-    """Keep ``result`` as ``scene``'s last result; returns the run id stored in its status."""
-    run = uuid.uuid4().hex
-    kept = _RESULTS.get(scene.session_uid, [])[-1:]
-    if kept and _map_bytes(kept[0][1]) > KEEP_PREVIOUS_BYTES:
-        kept = []
-    _RESULTS[scene.session_uid] = kept + [(run, result)]
-    return run
-
-
-def forget(scene):
-    """Drop ``scene``'s status and last result (Clear)."""
-    _RESULTS.pop(scene.session_uid, None)
-    if STATUS in scene:
-        del scene[STATUS]
-
-
 @persistent
 def _forget_all(*_args):
-    _RESULTS.clear()
     if not bpy.app.background:
         from ..relight_addon.blender import overlay
         overlay.unregister_overlay()
@@ -121,6 +52,7 @@ def update_overlay(settings, context):
     from ..relight_addon.blender import overlay
     from ..relight_addon.core.display.colormap import MODE_RATIO, MODE_VISIBILITY
     from ..relight_addon.core.display.elements import element_values, strongest_links
+    from ..relight_addon.blender.state import last_result
     overlay.clear_overlay_data()
     result = last_result(context.scene)
     mode = settings.overlay
@@ -158,60 +90,6 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                                       "in the viewport")
 
 
-def status(scene):
-    """The last precompute's status dict, or None (also for a copy of a scene, which carries
-    its original's status: it describes the original's lamps and result)."""
-    st = scene.get(STATUS)
-    if st is None:
-        return None
-    from ..relight_addon.blender.write import scene_key
-    if scene_key(scene) is None:
-        return None
-    return st.to_dict() if hasattr(st, "to_dict") else st
-
-
-def store_status(scene, result, seconds, correction, run, warnings, fingerprint="",
-                 geometry="", real="", virtual=(), room="", objects=False):
-    """Write what the panel shows: counts, time, model misfit, lamps and their exitances, the
-    read and write warnings, and the scene fingerprint that Update compares."""
-    import math
-    stats = result.stats
-    scale = [float(x) for x in result.exitance_scale]
-    mean = sum(scale) / len(scale) if scale and sum(scale) > 0 else 1.0
-    est = result.lamps
-
-    def finite(x, default):
-        return float(x) if math.isfinite(x) else default
-    scene[STATUS] = {
-        "preset": result.options.preset, "correction": correction, "run": run,
-        "elements": int(stats.get("elements", 0)), "links": int(stats.get("links", 0)),
-        "seconds": float(seconds), "misfit": float(stats.get("photo_misfit", float("nan"))),
-        "lamps": list(result.solution.scene.lamp_names),
-        "exitance_scale": scale, "relative_exitance": [s / mean for s in scale],
-        # the photo's view of each lamp against its set power (geometric mean 1 over the lamps
-        # on in the photo; -1 where the photo cannot tell), its uncertainty, whether it is used
-        "photo_ratio": [finite(x, -1.0) for x in est.photo_ratio],
-        "photo_sigma": [finite(x, -1.0) for x in est.uncertainty],
-        "photo_used": [bool(x) for x in est.applied],
-        "photo_weight": [float(x) for x in est.photo_weight],
-        "rho_mean": finite(est.rho_mean, -1.0),
-        "rho_sigma": finite(getattr(est, "rho_sigma", float("inf")), -1.0),
-        # a dense mesh solved on a decimated proxy: its faces and how far the mesh is from it
-        "proxy_faces": int(stats.get("proxy_faces", 0)),
-        "input_faces": int(stats.get("input_faces", 0)),
-        "proxy_deviation": finite(float(stats.get("proxy_deviation", 0.0)), 0.0),
-        "warnings": [str(w) for w in warnings],
-        "fingerprint": fingerprint, "geometry": geometry,
-        # the room (the scene without its virtual objects) without its virtual lamps (what the
-        # real lamps' maps depend on), and the virtual lamps (lights added after the first
-        # precompute: not in the photo)
-        "real": real, "virtual": list(virtual),
-        # the room with its virtual lamps, whose result an Update that only changes virtual
-        # objects starts from ("" when it is not kept), and whether there are such objects
-        "room": room, "objects": bool(objects),
-    }
-
-
 classes = (RelightSceneSettings,)
 
 
@@ -219,19 +97,24 @@ def attach():
     bpy.types.Scene.relight = bpy.props.PointerProperty(type=RelightSceneSettings)
     bpy.types.Object.relight_role = EnumProperty(
         name="Relight Role", items=ROLE_ITEMS, default="relit",
-        description="How Relight treats this object: relit photographed surface, occluder only, "
-                    "or ignored")
+        description="How Relight treats this object: relit (a photographed surface), occluder "
+                    "(only blocks light), ignored, virtual (an object added to the photo), or "
+                    "receiver (AR: a stand-in for a photographed surface)")
     bpy.types.Object.relight_shadows = EnumProperty(
         name="Shadows", items=SHADOW_ITEMS, default="EXACT",
         description="How a virtual object's shadows are computed")
     bpy.types.Object.relight_spheres = bpy.props.IntProperty(
-        name="Spheres", default=32, min=1, max=512,
+        name="Spheres", default=DEFAULT_SPHERES, min=1, max=MAX_SPHERES,
         description="Spheres approximating a moving virtual object: more give closer shadows "
                     "under small lamps and slower renders (each sphere is evaluated per lamp at "
                     "every shading point; EEVEE's shader compiler fails at about 128). Update "
                     "after changing it")
     if _forget_all not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(_forget_all)
+    from .. import preferences
+    from ..relight_addon.blender import pipeline, state
+    state.attach(preferences.keep_limit_bytes)
+    pipeline.configure(memory_limit=preferences.memory_limit_bytes)
 
 
 def detach():
@@ -242,7 +125,8 @@ def detach():
     for prop in ("relight_role", "relight_shadows", "relight_spheres"):
         if hasattr(bpy.types.Object, prop):
             delattr(bpy.types.Object, prop)
-    _RESULTS.clear()
+    from ..relight_addon.blender import state
+    state.detach()
     if not bpy.app.background:
         from ..relight_addon.blender import overlay
         overlay.unregister_overlay()

@@ -7,7 +7,8 @@ traced at; a timer then waits until no such change came for ``STILL`` seconds an
 is running (a mouse that pauses mid-drag must not freeze it for a trace) and runs what
 Update's fast path runs (``sphere_nodes.sync`` with the scene's last result), which traces the
 shadow where the object now stands.  Not in background mode (scripts and farms call Update).
-Nothing happens without a last result in memory (after a reload: press Update).
+Nothing happens without a last result (in memory, or kept in the file: it is read when the
+first settle runs).
 """
 
 import time
@@ -23,19 +24,19 @@ _pending = {}           # scene name -> time of the last transform change seen
 
 
 def _modules():
-    from ..relight_addon.blender import sphere_nodes, write
-    from . import precompute, settings
-    return sphere_nodes, write, precompute, settings
+    from ..relight_addon.blender import ids, sphere_nodes, state
+    from . import precompute
+    return sphere_nodes, ids, precompute, state
 
 
 def unsettled(scene) -> bool:
     """Whether a moving object of ``scene`` stands elsewhere than its settled shadow."""
-    sphere_nodes, write, _, settings = _modules()
+    sphere_nodes, ids, _, state = _modules()
     if not getattr(getattr(scene, "relight", None), "settle", False):
         return False
-    if settings.last_result(scene) is None:
+    if not state.has_kept(scene):          # (cheap: a kept solution is read when it is used)
         return False
-    key = write.scene_key(scene)
+    key = ids.scene_key(scene)
     fitted = sphere_nodes.sphere_groups(key) if key is not None else {}
     objs = [o for o in sphere_nodes.moving_objects(scene) if o.name in fitted]   # as sync's
     if key is None or not objs:
@@ -74,14 +75,14 @@ def _depsgraph(scene):
 
 def settle_now(scene) -> bool:
     """Trace ``scene``'s moving objects' shadows where they stand; False when nothing ran."""
-    sphere_nodes, _, precompute, settings = _modules()
+    sphere_nodes, _, precompute, state = _modules()
     busy = _job_running("RENDER") or _job_running("OBJECT_BAKE")
     if busy or precompute.solve_running() or not unsettled(scene):
         return False
     depsgraph = _depsgraph(scene)
     if depsgraph is None:
         return False
-    sphere_nodes.sync(scene, depsgraph, result=settings.last_result(scene), settle_shadows=True)
+    sphere_nodes.sync(scene, depsgraph, result=state.last_result(scene), settle_shadows=True)
     return True
 
 

@@ -92,9 +92,6 @@ class RELIGHT_OT_unwrap_missing(RelightOperator, bpy.types.Operator):
 
     @classmethod
     def disabled_reason(cls, context):
-        reason = super().disabled_reason(context)
-        if reason:
-            return reason
         if not any(len(o.data.uv_layers) == 0 for o in _targets(context)):
             return "Every mesh (selected, or visible when nothing is selected) has a UV map"
         return None

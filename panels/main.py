@@ -1,35 +1,23 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """RELIGHT_PT_main: the sidebar "Relight" tab of the 3D viewport."""
 
-import functools
 import math
-import os
 
 import bpy
+
+from ..relight_addon.version import addon_version
 
 # Warnings listed in the panel (all of them are in the Info editor and the status dict).
 PANEL_WARNINGS = 8
 
 
-@functools.lru_cache(maxsize=1)
-def addon_version():
-    """Version string from blender_manifest.toml, the single source of truth."""
-    import tomllib
-
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "blender_manifest.toml")
-    try:
-        with open(path, "rb") as fh:
-            return str(tomllib.load(fh).get("version", "?"))
-    except (OSError, ValueError):
-        return "?"
-
-
 def status_lines(scene):
     """(text, icon) lines describing the last precompute (empty before the first)."""
-    from ..operators.settings import status
-    st = status(scene)
+    from ..relight_addon.blender import state
+    st = state.status(scene)
     if not st:
         return []
+    records = state.lamp_records(scene)
     lines = [(f"{st['elements']:,} elements, {st['links']:,} links", 'MESH_GRID'),
              (f"{st['seconds']:.1f} s ({st['preset']}, shadow removal {st['correction'].lower()})",
               'TIME')]
@@ -45,10 +33,15 @@ def status_lines(scene):
                       f"Mean reflectance: {rho:.2f} (the photo's shadows do not tell it)", 'INFO'))
     n = len(st["lamps"])
     for j, name in enumerate(st["lamps"]):
-        obj = bpy.data.objects.get(name)
+        record = records[j] if j < len(records) else {}
+        obj = state.find_light(scene, record) if record.get("uid") else None
         now = ""
-        if obj is not None and obj.type == "LIGHT" and obj.data.get("relight_power0"):
-            now = f"; now at {obj.data.energy / obj.data['relight_power0']:.2f}x"
+        if record.get("kind", "light") == "light" and obj is None and record:
+            now = "; deleted: off"
+        elif obj is not None and float(record.get("p0", 0.0)) > 0:
+            now = f"; now at {obj.data.energy / float(record['p0']):.2f}x"
+            if obj.name != name:
+                now += f" (light '{obj.name}')"
         ratio = st.get("photo_ratio", [-1] * n)[j]
         sigma = st.get("photo_sigma", [-1] * n)[j]
         used = st.get("photo_used", [False] * n)[j]
@@ -67,8 +60,8 @@ def status_lines(scene):
 
 
 def warning_lines(scene, limit=PANEL_WARNINGS):
-    from ..operators.settings import status
-    st = status(scene) or {}
+    from ..relight_addon.blender import state
+    st = state.status(scene) or {}
     warnings = list(st.get("warnings", ()))
     lines = warnings[:limit]
     if len(warnings) > limit:
@@ -135,6 +128,7 @@ class RELIGHT_PT_main(bpy.types.Panel):
                 col.label(text=text)
         row = layout.row(align=True)
         row.operator("relight.restore_originals", icon='LOOP_BACK')
+        row.operator("relight.show_relit", icon='LOOP_FORWARDS')
         row.operator("relight.clear", icon='TRASH')
 
 

@@ -424,3 +424,57 @@ def noise_floor(lamp_powers: dict | None = None, samples_list=(16, 64), seeds=(0
         out[s] = {"mean": float(de.mean()), "p95": float(np.percentile(de, 95)),
                   "max": float(de.max())}
     return out
+
+
+# -- what a render shows of the relit materials ---------------------------------------------
+
+def _image_pixels(img):
+    buf = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(buf)
+    return buf.reshape(img.size[1], img.size[0], -1)
+
+
+def emit_bake(bpy, names, materials=None):
+    """{object: (H, W, 3)} Cycles EMIT bake (1 sample) of each object's first material (or of
+    ``materials[name]``, assigned for the bake) at the size of its texture."""
+    scene = bpy.context.scene
+    cy = scene.cycles
+    saved = (scene.render.engine, cy.device, cy.samples, cy.use_adaptive_sampling)
+    scene.render.engine = "CYCLES"
+    cy.device, cy.samples, cy.use_adaptive_sampling = "CPU", 1, False
+    vl = bpy.context.view_layer
+    for o in vl.objects:
+        o.select_set(False)
+    made = []
+    try:
+        for name in names:
+            obj = bpy.data.objects[name]
+            relit = obj.material_slots[0].material
+            size = relit.node_tree.nodes["T"].image.size if "T" in relit.node_tree.nodes else \
+                (48, 48)
+            mat = relit
+            if materials is not None:
+                mat = materials[name]
+                obj.material_slots[0].material = mat
+            img = bpy.data.images.new(f"__bench_emit_{name}", size[0], size[1], float_buffer=True)
+            img.colorspace_settings.name = "Linear Rec.709"
+            node = mat.node_tree.nodes.new("ShaderNodeTexImage")
+            node.image = img
+            prev = mat.node_tree.nodes.active
+            mat.node_tree.nodes.active = node
+            made.append((obj, relit, mat, node, img, prev))
+            obj.select_set(True)
+            vl.objects.active = obj
+        assert bpy.ops.object.bake(type="EMIT", margin=2, use_clear=True,
+                                   target="IMAGE_TEXTURES") == {"FINISHED"}
+        return {obj.name: _image_pixels(img)[..., :3].astype(np.float64).copy()
+                for obj, _, _, _, img, _ in made}
+    finally:
+        for obj, relit, mat, node, img, prev in made:
+            mat.node_tree.nodes.remove(node)
+            if prev is not None:
+                mat.node_tree.nodes.active = prev
+            bpy.data.images.remove(img)
+            obj.material_slots[0].material = relit
+            obj.select_set(False)
+        scene.render.engine, cy.device, cy.samples, cy.use_adaptive_sampling = saved

@@ -67,10 +67,10 @@ out["after_restore"] = user_state(bpy)
 out["precompute"] = sorted(bpy.ops.relight.precompute(preset="draft"))
 out["relit_after"] = sorted(o.name for o in bpy.data.objects if any(
     s.material is not None and s.material.get("relight_generated") for s in o.material_slots))
-out["fingerprint"] = bpy.context.scene["relight_status"]["fingerprint"]
+out["fingerprint"] = bpy.context.scene["relight_status"]["run"]
 bpy.context.scene.relight.preset = "draft"
 out["update"] = sorted(bpy.ops.relight.update())
-out["fingerprint_after_update"] = bpy.context.scene["relight_status"]["fingerprint"]
+out["fingerprint_after_update"] = bpy.context.scene["relight_status"]["run"]
 print("RELIGHT_FRESH_JSON " + json.dumps(out))
 """
 
@@ -402,7 +402,7 @@ def test_clear_forgets_the_status_and_match_lamp_powers_is_disabled():
 def test_results_belong_to_their_scene_and_file(tmp_path):
     """Two scenes: Clear in one leaves the other's relit data and status; the in-memory result
     (for Update and the overlays) is forgotten when a file is loaded."""
-    settings = _module("operators.settings")
+    settings = _module("relight_addon.blender.state")
     _addon()
     build_scene()
     first = bpy.context.scene
@@ -427,8 +427,13 @@ def test_results_belong_to_their_scene_and_file(tmp_path):
     blend = str(tmp_path / "two.blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend)
     bpy.ops.wm.open_mainfile(filepath=blend)
+    # memory is forgotten; the saved file keeps the first scene's solution for its Update
     for s in bpy.data.scenes:
-        assert settings.last_result(s) is None
+        assert settings.last_result(s, load=False) is None
+    first = next(s for s in bpy.data.scenes if "relight_status" in s)
+    kept = settings.last_result(first)
+    assert kept is not None and kept.stats["elements"] == first["relight_status"]["elements"]
+    assert all(settings.last_result(s) is None for s in bpy.data.scenes if s != first)
 
 
 # -- conventions -----------------------------------------------------------------------------
@@ -451,6 +456,8 @@ def test_a_running_precompute_disables_another():
 
     class Running:
         state = "running"
+        alive = True
+        cancelled = False
 
     pre._ACTIVE["job"] = Running()
     try:

@@ -119,7 +119,7 @@ def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
     # (each lamp's coefficient is written with 6 significant digits: 1e-6 a term)
     assert probe.data.intensity == pytest.approx(1.0, abs=1e-5)
     shares = probe_mod.lamp_shares(
-        importlib.import_module(PKG + ".operators.settings").last_result(scene),
+        importlib.import_module(PKG + ".relight_addon.blender.state").last_result(scene),
         list(scene["relight_status"]["lamps"]))
     bpy.data.lights["LampA"].energy = 0.0
     bpy.context.view_layer.update()

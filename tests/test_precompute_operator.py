@@ -40,6 +40,18 @@ def _write():
     return importlib.import_module(PKG + ".relight_addon.blender.write")
 
 
+def _state():
+    _addon()
+    return importlib.import_module(PKG + ".relight_addon.blender.state")
+
+
+def _prepare(preset, correction=None):
+    """The pipeline's Job of a Precompute of the current scene (read, decided, not computed)."""
+    _addon()
+    pipeline = importlib.import_module(PKG + ".relight_addon.blender.pipeline")
+    return pipeline.prepare(bpy.context, "precompute", preset, correction)
+
+
 # -- scene ---------------------------------------------------------------------------------
 
 def _image(name, seed):
@@ -356,16 +368,15 @@ def test_worker_job_and_display_maps():
     build_scene()
     op = importlib.import_module(PKG + ".operators.precompute")
     counts0 = (len(bpy.data.images), len(bpy.data.materials))
-    data, report, error = op.read_for_precompute(bpy.context)
-    assert error is None
-    job = op.SolveJob(data, "draft")
+    job = op.SolveJob(_prepare("draft"))
+    data = job.job.data
     job.cancel()
     job.start()
     assert job.join(timeout=120)
     assert job.state == "cancelled" and job.result is None
     assert (len(bpy.data.images), len(bpy.data.materials)) == counts0
     # and a job left alone completes with a solution whose basis has one entry per lamp
-    job = op.SolveJob(data, "draft", "NONE").start()
+    job = op.SolveJob(_prepare("draft", "NONE")).start()
     assert job.join(timeout=300)
     assert job.state == "done", job.error
     sol = job.result.solution
@@ -594,10 +605,8 @@ def test_cancel_midway_changes_nothing():
     _addon()
     build_scene()
     op = importlib.import_module(PKG + ".operators.precompute")
-    data, report, error = op.read_for_precompute(bpy.context)
-    assert error is None
     before = _relit_state()
-    job = op.SolveJob(data, "draft")
+    job = op.SolveJob(_prepare("draft"))
     seen = []
     report_progress = job._progress
 
@@ -626,7 +635,7 @@ def test_update_reuses_an_unchanged_result():
 
     def stamp():
         return bpy.data.images["Floor_mat_img.relight.T"].as_pointer(), \
-            scene["relight_status"]["fingerprint"]
+            scene["relight_status"]["parts"]
 
     first = stamp()
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -655,8 +664,7 @@ def test_overlay_setting_is_inert_in_background(fresh):
         s.overlay = mode
     overlay = importlib.import_module(PKG + ".relight_addon.blender.overlay")
     assert not overlay.is_registered()
-    settings = importlib.import_module(PKG + ".operators.settings")
-    assert settings.last_result(bpy.context.scene).stats["elements"] == \
+    assert _state().last_result(bpy.context.scene).stats["elements"] == \
         bpy.context.scene["relight_status"]["elements"]
 
 
@@ -688,7 +696,7 @@ def test_update_after_photo_edit_keeps_the_mesh():
     scene = bpy.context.scene
     scene.relight.preset = "draft"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    settings = importlib.import_module(PKG + ".operators.settings")
+    settings = _state()
     first = settings.last_result(scene)
     t_before = _pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
     img = bpy.data.images["Floor_mat_img"]
@@ -705,8 +713,7 @@ def test_update_after_photo_edit_keeps_the_mesh():
     status = scene["relight_status"]
     assert status["rho_sigma"] == -1 and status["rho_mean"] == pytest.approx(0.5)
     assert second.solution.hierarchy is first.solution.hierarchy       # mesh and links kept
-    assert scene["relight_status"]["fingerprint"] != "" and \
-        scene["relight_status"]["geometry"] != ""
+    assert scene["relight_status"]["action"] == "reuse"
     t_reused = _pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}   # from scratch
     assert settings.last_result(scene).solution.hierarchy is not first.solution.hierarchy

@@ -247,7 +247,7 @@ def _virtual_lamp_means(scan):
     from scenes import family_eval as fe
     from scenes.addon import PACKAGE, register_repo_addon
     register_repo_addon()
-    settings = importlib.import_module(PACKAGE + ".operators.settings")
+    settings = importlib.import_module(PACKAGE + ".relight_addon.blender.state")
     fe.photographed_room(20, "exact", scan=scan)
     scene = bpy.context.scene
     scene.relight.preset = "medium"
@@ -296,7 +296,7 @@ def _box_darkening(scan):
     from scenes.addon import PACKAGE, register_repo_addon
     from scenes.materials import grey_diffuse
     register_repo_addon()
-    settings = importlib.import_module(PACKAGE + ".operators.settings")
+    settings = importlib.import_module(PACKAGE + ".relight_addon.blender.state")
     fe.photographed_room(20, "exact", scan=scan)
     scene = bpy.context.scene
     scene.relight.preset = "medium"
@@ -368,7 +368,7 @@ def test_the_memory_refusal_names_what_to_lower_for_a_dense_mesh():
 
     from scenes.addon import PACKAGE, register_repo_addon
     register_repo_addon()
-    precompute = importlib.import_module(PACKAGE + ".operators.precompute")
+    precompute = importlib.import_module(PACKAGE + ".relight_addon.blender.pipeline")
 
     class Mesh:                                   # what memory_error reads of a SceneData
         def __init__(self, faces, photo=0):

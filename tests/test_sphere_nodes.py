@@ -514,7 +514,7 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     # the spheres' V at the texel centres (the numpy twin)
     group = next(g for g in bpy.data.node_groups if g.get(sn.OBJECT_KEY) == "Monkey")
     centres, radii, hull = sn.group_spheres(group)
-    settings = importlib.import_module(PKG + ".operators.settings")
+    settings = importlib.import_module(PKG + ".relight_addon.blender.state")
     res = settings.last_result(scene)
     twin_mod = importlib.import_module(PKG + ".relight_addon.core.relight.settled")
     pts, _ = twin_mod.texel_points(res.solution.scene, res.texel_map)

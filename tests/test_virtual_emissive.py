@@ -59,10 +59,10 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
         return {n: float(_pixels(bpy.data.objects[n].material_slots[0].material.node_tree
                                  .nodes["T"].image)[..., :3].mean()) for n in info.objects}
     before = textures()
-    ops = importlib.import_module("relight_ext.operators.precompute")
+    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
     solves = []
-    solve = ops.run_precompute
-    monkeypatch.setattr(ops, "run_precompute", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solve = ops.solve
+    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
     panel = _panel()
     panel.relight_role = "virtual"
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -164,10 +164,10 @@ def test_a_virtual_lamp_undoes_and_redoes(monkeypatch):
     assert "M Virtual" in floor_nodes()
     assert all(np.array_equal(with_lamp[n], a) for n, a in _images(info).items())
     bpy.ops.ed.undo()
-    ops = importlib.import_module("relight_ext.operators.precompute")
+    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
     solves = []
-    solve = ops.run_precompute
-    monkeypatch.setattr(ops, "run_precompute", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solve = ops.solve
+    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
     assert bpy.ops.relight.update() == {"FINISHED"}   # after the undo: the lamp again
     assert solves == []
     got = _images(info)

@@ -75,18 +75,20 @@ def _add_point(name, location, energy):
 def _relit(info):
     """{object: relit colour} from the relit materials' images and their drivers' values."""
     bpy.context.view_layer.update()
-    out = {}
-    for name in info.objects:
-        nt = bpy.data.objects[name].material_slots[0].material.node_tree
-        t = _pixels(nt.nodes["T"].image)[..., :3].astype(np.float64)
-        total = 0.0
-        for node in nt.nodes:
-            if node.name.startswith("M "):
-                lamp = node.name[2:]
-                total = total + nt.nodes[f"I {lamp}"].outputs[0].default_value * \
-                    _pixels(node.image)[..., :3]
-        out[name] = t * total
-    return out
+    return {name: relit_colour(name) for name in info.objects}
+
+
+def relit_colour(name):
+    """T x sum_k I_k M_k of object ``name``'s (first) relit material: its images times its
+    drivers' present values, as a render shows it (drivers evaluated at the last update)."""
+    nt = bpy.data.objects[name].material_slots[0].material.node_tree
+    t = _pixels(nt.nodes["T"].image)[..., :3].astype(np.float64)
+    total = 0.0
+    for node in nt.nodes:
+        if node.name.startswith("M "):
+            total = total + nt.nodes[f"I {node.name[2:]}"].outputs[0].default_value * \
+                _pixels(node.image)[..., :3]
+    return t * total
 
 
 def _de(info, got, want):

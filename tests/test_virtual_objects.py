@@ -100,10 +100,10 @@ def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(monkeyp
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     room = _images(info)
     assert room
-    ops = importlib.import_module("relight_ext.operators.precompute")
+    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
     solves = []
-    solve = ops.run_precompute
-    monkeypatch.setattr(ops, "run_precompute", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solve = ops.solve
+    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
 
     box = _grey_box((2.7, 3.2, 0.3))
     box.relight_role = "virtual"

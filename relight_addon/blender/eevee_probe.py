@@ -20,7 +20,8 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from . import write
+from . import ids, materials, state
+from .drivers import add_driver
 
 PROBE_NAME = "Relight Irradiance Volume"
 SPACING = 0.25              # m between the volume's samples
@@ -33,7 +34,7 @@ SHARES_KEY = "relight_lamp_shares"      # {lamp: its share of the relit room's l
 def relit_bounds(scene):
     """(lo, hi) world corners of the box around the objects with relit materials, or None."""
     pts = []
-    for obj in {o for o, _, _ in write._relit_slots(scene)}:
+    for obj in {o for o, _, _ in materials.relit_slots(scene, ids.scene_key(scene))}:
         pts.append(np.array([obj.matrix_world @ Vector(c) for c in obj.bound_box]))
     if not pts:
         return None
@@ -42,9 +43,9 @@ def relit_bounds(scene):
 
 
 def find_volume(scene):
-    key = write.scene_key(scene)
+    key = ids.scene_key(scene)
     return next((o for o in scene.objects
-                 if o.type == "LIGHT_PROBE" and write._ours(o, key)), None)
+                 if o.type == "LIGHT_PROBE" and ids.ours(o, key)), None)
 
 
 def lamp_shares(result, names):
@@ -65,9 +66,9 @@ def intensity_terms(scene, shares):
     driver follows, and the share of the ones it cannot (emissive meshes, missing lights)."""
     terms, constant = [], 0.0
     for name, w in shares.items():
-        obj = scene.objects.get(name)
-        if obj is not None and obj.type == "LIGHT" and write.POWER0 in obj.data:
-            terms.append((f"p{len(terms)}", obj.data, float(obj.data[write.POWER0]), w))
+        obj = state.lamp_object(scene, name)
+        if obj is not None and obj.type == "LIGHT" and ids.POWER0 in obj.data:
+            terms.append((f"p{len(terms)}", obj.data, float(obj.data[ids.POWER0]), w))
         else:
             constant += w
     return terms, constant
@@ -86,14 +87,14 @@ def fit_volume(scene, shares, spacing=SPACING):
     if bounds is None:
         return None
     lo, hi = bounds
-    key = write.scene_key(scene, create=True)
+    key = ids.scene_key(scene, create=True)
     probe = find_volume(scene)
     if probe is None:
         data = bpy.data.lightprobes.new(PROBE_NAME, "VOLUME")
         probe = bpy.data.objects.new(PROBE_NAME, data)
         scene.collection.objects.link(probe)
-        write._tag(probe, key)
-        write._tag(data, key)
+        ids.tag(probe, key)
+        ids.tag(data, key)
     size = np.maximum(hi - lo, 1e-3)
     probe.location = tuple(map(float, (lo + hi) / 2))
     probe.rotation_euler = (0.0, 0.0, 0.0)
@@ -126,12 +127,12 @@ def drive_intensity(scene, data):
         # characters, ~16 lamps this way
         parts = [f"{w / (p0 * level):.6g}*{var}" for var, _, p0, w in terms if p0 > 0]
         expr = "+".join(parts + ([f"{constant / level:.6g}"] if constant > 0 else []))
-        write.add_driver(_IntensitySocket(data), expr,
+        add_driver(_IntensitySocket(data), expr,
                          [(var, "LIGHT", light, "energy") for var, light, _, _ in terms])
 
 
 class _IntensitySocket:
-    """``write.add_driver`` drives a socket's ``default_value``; the probe's is ``intensity``."""
+    """``drivers.add_driver`` drives a socket's ``default_value``; the probe's is ``intensity``."""
 
     def __init__(self, data):
         self.data = data

@@ -60,12 +60,13 @@ import numpy as np
 from ..core.lights import Lights
 from ..core.scene import RHO_MAX, ImageTexels, SceneData
 from ..core.texture.colour import srgb_to_linear
+from . import ids
+from .materials import original_material
+from .roles import ROLES, has_role, moving, object_role  # noqa: F401  (ROLES: the readers' API)
 
 # Material.use_nodes is deprecated (always on) from Blender 5.0.
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
 
-ROLES = ("relit", "occluder", "ignored", "virtual")
-ROLE_PROPERTY = "relight_role"
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 AREA_SHAPES = {"SQUARE", "RECTANGLE", "DISK", "ELLIPSE"}
 LIGHT_TYPES = {"POINT", "SPOT", "SUN", "AREA"}
@@ -256,6 +257,10 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
         node = front_only or shader
         strength = float(node.inputs["Strength"].default_value)
         emission = _rgb(node.inputs["Color"].default_value) * strength
+        if not (np.isfinite(emission) & (emission < MAX_VALUE)).all():
+            report.errors.append(f"Material '{name}': its emission strength is {strength:g}: "
+                                 "set a finite strength")
+            emission = black
         return _MaterialInfo(np.zeros(3), np.maximum(emission, 0.0),
                              two_sided=front_only is None,
                              strength=(node.name, "Strength", strength))
@@ -269,7 +274,10 @@ def _material_info(mat, report: ReadReport, images: dict, wants_texture: bool) -
         colour_e = shader.inputs.get("Emission Color")
         if strength_sock is not None and colour_e is not None:
             s = float(strength_sock.default_value)
-            if s > 0:
+            if not np.isfinite(s) or s >= MAX_VALUE:
+                report.errors.append(f"Material '{name}': its Emission Strength is {s:g}: set a "
+                                     "finite strength")
+            elif s > 0:
                 emission = np.maximum(_rgb(colour_e.default_value) * s, 0.0)
                 if colour_e.is_linked or strength_sock.is_linked:
                     report.warn(f"Material '{name}': linked emission inputs are not read, "
@@ -479,23 +487,7 @@ def _analytic_light(light, matrix, lamp, energy):
 def user_material(mat):
     """The user's material behind a slot's material: a relit copy (our Emission material) is
     read through to the original it keeps (write.py)."""
-    from .write import original_material
     return original_material(getattr(mat, "original", mat) or mat) if mat is not None else None
-
-
-def object_role(obj, roles=None):
-    """"relit" / "occluder" / "ignored" of an object (the ``roles`` argument, a string custom
-    property ``relight_role`` set from a script, or the add-on's Object property), or None when
-    the value is unknown."""
-    if roles and obj.name in roles:
-        role = roles[obj.name]
-    else:
-        raw = obj.get(ROLE_PROPERTY) if hasattr(obj, "get") else None
-        if isinstance(raw, str):    # a plain custom property (scripts)
-            role = raw
-        else:                       # the add-on's enum property, when it is registered
-            role = getattr(obj, ROLE_PROPERTY, "relit")
-    return role if role in ROLES else None
 
 
 class _Instance:
@@ -521,15 +513,6 @@ def _ordered_instances(depsgraph):
     yield from sorted(objects, key=lambda e: e.object.original.name_full)
 
 
-def _moving(obj) -> bool:
-    from .sphere_nodes import moving
-    return moving(obj)
-
-
-def _has_role(obj, roles):
-    return (roles and obj.name in roles) or object_role(obj) not in (None, "relit")
-
-
 def reference_power(light) -> float:
     """The power a lamp that is off at precompute time is computed at: the highest value its
     ``energy`` is keyframed to, or 1 (W, or W/m^2 for a sun).  Its driver divides by it."""
@@ -551,13 +534,84 @@ def reference_power(light) -> float:
     return best if best > 0 else 1.0
 
 
-def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
+class _AsRecorded:
+    """A light seen with the colour its map was computed at (a lamp record's), the rest as it
+    is now."""
+
+    def __init__(self, light, color):
+        self._light, self.color = light, tuple(float(c) for c in color)
+
+    def __getattr__(self, name):
+        return getattr(self._light, name)
+
+
+def _claim_lamps(scene, records):
+    """{light object name: its lamp record} for the scene's lights that carry a record's
+    identity (one light per record: a duplicate of a lamp is not that lamp)."""
+    if not records:
+        return {}
+    by_uid = {r["uid"]: r for r in records if r.get("uid")}
+    holders = {}
+    for obj in scene.objects:
+        u = ids.uid(obj) if obj.type == "LIGHT" else None
+        if u in by_uid:
+            holders.setdefault(u, []).append(obj)
+    claims = {}
+    for u, objs in holders.items():
+        named = [o for o in objs if o.name == by_uid[u].get("object")]
+        claims[(named or sorted(objs, key=lambda o: o.name))[0].name] = by_uid[u]
+    return claims
+
+
+def _unique(label, taken):
+    """``label``, or ``label.1``, ``label.2``... when a lamp of the maps already has it."""
+    if label not in taken:
+        return label
+    n = 1
+    while f"{label}.{n}" in taken:
+        n += 1
+    return f"{label}.{n}"
+
+
+# Blender stores an infinite strength as the largest float32 (3.4e38): anything this large is one
+MAX_VALUE = 1e30
+# A lamp this much weaker than the strongest of its unit is a typing slip (1e-9 W beside 60 W),
+# not a lamp of the photo: the photo's estimate would replace its power by 1e8 times it.
+WEAKEST_LAMP = 1e-6
+
+
+def _check_powers(report):
+    """Errors for lamps of the photo set far weaker than the others of their unit (W, or W/m^2
+    for suns): their power must be what lit the photo, or 0 for a lamp that was off."""
+    by_unit = {}
+    for src in report.lamp_sources:
+        if src.get("kind") == "light" and not src.get("virtual") and src["power_photo"] > 0:
+            by_unit.setdefault(src["type"] == "SUN", []).append(src)
+    for group in by_unit.values():
+        strongest = max(s["power_photo"] for s in group)
+        for s in group:
+            if s["power_photo"] < WEAKEST_LAMP * strongest:
+                unit = "W/m^2" if s["type"] == "SUN" else "W"
+                report.errors.append(
+                    f"Light '{s['name']}' is set to {s['power_photo']:g} {unit}, "
+                    f"{s['power_photo'] / strongest:.0e} of the strongest lamp: set its power in "
+                    "the photo (0 if it was off)")
+
+
+def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=None):
     """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene.
 
     ``virtual``: names of lights that are not in the photo (virtual lamps, added after the
     precompute): they are read off in the photo (intensity 0) at their current power, and an
     area light among them as a core Light rather than patches (so that it can be added to a
-    finished solution without new links)."""
+    finished solution without new links).
+
+    ``lamps``: the lamp records of the scene's last precompute (state.py), or None before the
+    first.  A light carrying a record's identity is read as that record says: under its label
+    (a rename changes nothing), in the photo or not, at the power and colour its map was
+    computed at (the light's present power and colour are the drivers' business); a light
+    without one is new since, so virtual.  Of two lights with one identity (a duplicate), the
+    one named as the record is the lamp, the other is new."""
     if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
         scene = context_or_scene.scene
         if depsgraph is None:
@@ -578,6 +632,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
     emissive_lamp: dict = {}     # (object, material) -> lamp index
 
     labels_seen: dict = {}
+    claims = _claim_lamps(scene, lamps)
+    taken_labels = {r["label"] for r in (lamps or ())}
     # depsgraph.object_instances: every evaluated object of the view layer plus the instances
     # (collection instances, geometry-nodes and particle instances) with their world matrices.
     for inst in _ordered_instances(depsgraph):
@@ -586,19 +642,23 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
         if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
             continue
         parent = inst.parent.original if inst.is_instance and inst.parent is not None else None
+        if parent is not None and parent == obj and obj.type != "MESH":
+            # a curve's or text's own geometry, also listed as an instance of itself (it is
+            # read once, as the object; a mesh's geometry-nodes instances are its own)
+            continue
         label = obj.name if parent is None else f"{parent.name}/{obj.name}"
         if label in labels_seen:
             labels_seen[label] += 1
             label = f"{label}.{labels_seen[label]}"
         else:
             labels_seen[label] = 0
-        role_of = parent if parent is not None and _has_role(parent, roles) else obj
+        role_of = parent if parent is not None and has_role(parent, roles) else obj
         role = object_role(role_of, roles)
         if role is None:
-            report.warn(f"Object '{role_of.name}': unknown {ROLE_PROPERTY} "
-                        f"'{role_of.get(ROLE_PROPERTY)}', read as relit")
+            report.warn(f"Object '{role_of.name}': unknown {ids.ROLE} "
+                        f"'{role_of.get(ids.ROLE)}', read as relit")
             role = "relit"
-        if role == "virtual" and _moving(role_of):     # sphere shadows at render time
+        if role == "virtual" and moving(role_of):     # sphere shadows at render time
             report.moving_objects.append(label)
             continue
         if obj.hide_render or (parent is not None and parent.hide_render) or role == "ignored":
@@ -616,12 +676,26 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 report.warn(f"Light '{label}': light nodes are ignored")
             # A lamp that is off in the photo still gets its basis (light transport is linear),
             # computed at a reference power; the photo sees it at intensity 0.
+            record = claims.get(obj.name) if parent is None else None
             power = float(light.energy)
+            if not np.isfinite(power) or power < 0 or power >= MAX_VALUE:
+                report.errors.append(f"Light '{label}' has power {power:g}: set a finite power, "
+                                     "0 or more")
+                continue
             power_ref = power if power > 0 else reference_power(light)
+            if record is not None:
+                light = _AsRecorded(light, record.get("color0") or light.color)
+                power_ref = float(record["p0"])
+                power = float(record.get("photo", power_ref))
+                label = record["label"]
+            elif lamps is not None:
+                label = _unique(label, taken_labels)
+            taken_labels.add(label)
             if not np.any(light_colour(light) > 0):
                 report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
                 continue
-            is_virtual = label in virtual
+            is_virtual = bool(record.get("virtual")) if record is not None else \
+                (label in virtual or obj.name in virtual or lamps is not None)
             patches = light.type == "AREA" and not is_virtual and \
                 float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
             if patches:
@@ -634,21 +708,23 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 if not area > 0:
                     report.warn(f"Light '{label}' has zero area and is ignored")
                     continue
-            if is_virtual and power <= 0:
+            if record is None and is_virtual and power <= 0:
                 report.warn(f"Virtual lamp '{label}' has no power: it is ignored")
                 continue
-            if power <= 0:
+            if record is None and power <= 0:
                 unit = "W/m^2" if light.type == "SUN" else "W"
                 report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
                             f"its map is computed at {power_ref:g} {unit}, so raising its power "
                             "switches it on")
             k = len(lamp_names)
             lamp_names.append(label)
-            lamp_intensity.append(0.0 if is_virtual else power / power_ref)
+            lamp_intensity.append(0.0 if is_virtual else max(power, 0.0) / power_ref)
             report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
                                         "type": light.type, "virtual": is_virtual,
                                         "power_photo": 0.0 if is_virtual else power,
-                                        "power_ref": power_ref})
+                                        "power_ref": power_ref,
+                                        "uid": None if record is None else record["uid"],
+                                        "color0": [float(c) for c in light.color]})
             report.lamps += 1
             if not patches:
                 light_rows.append(_analytic_light(light, matrix, k, power_ref))
@@ -712,7 +788,7 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
                 info = mat_cache[mkey]
                 obj_group[sel] = len(report.groups)
                 report.groups.append((label, mat.name if mat is not None else ""))
-                if role == "occluder":
+                if role in ("occluder", "receiver"):
                     continue
                 obj_rho[sel] = np.clip(info.rho, 0.0, RHO_MAX)
                 if np.any(info.emission_radiance > 0):
@@ -824,12 +900,16 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=()):
             report.warn(f"'{a}' has faces at the same place as '{b}' (a duplicate?): they are "
                         "counted once, and the copies z-fight in renders: delete or move one")
     report.patches = data.n_patches
+    if lamps is None:
+        _check_powers(report)
     if report.zero_area_skipped:
         report.warn(f"{report.zero_area_skipped} zero-area face(s) skipped")
     if data.n_patches == 0 or not np.any(data.lamp >= 0):
         if not lamp_names:
             report.errors.append("The scene has no lamps: add an area light or an emissive face")
-    if lamp_names and not any(x > 0 for x in lamp_intensity):
+    # (after a precompute the photo's lamps are read at their power in the photo: lights out
+    # is an Update like any other)
+    if lamp_names and not any(x > 0 for x in lamp_intensity) and lamps is None:
         report.errors.append("Every lamp is off (power 0): set the real lamps to their power in "
                              "the photo before Precompute (then animate them)")
     if not np.any(data.occluder) and data.n_patches == 0:

@@ -40,8 +40,13 @@ import numpy as np
 from ..core.relight.settled import object_visibility, visibility_images
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
-from .write import (MAP_PREFIX, MAP_SOURCE, SHADOW_PREFIX, _HalfWriter, _ours, _tag, add_driver,
-                    scene_key)
+from . import ids
+from .drivers import add_driver
+from .images import MapWriter
+from .ids import MAP_SOURCE, scene_key
+from .nodes import Builder, new_group
+from .roles import DEFAULT_SPHERES, moving, moving_objects, sphere_count  # noqa: F401
+from .write import MAP_PREFIX, SHADOW_PREFIX
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
@@ -51,9 +56,6 @@ HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of t
 CAP_KEY = "relight_sphere_cap"         # on the shared per-sphere group: its version
 WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is wired to
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
-SHADOW_PROPERTY = "relight_shadows"    # on an object: "EXACT" (default) or "SPHERES"
-COUNT_PROPERTY = "relight_spheres"     # on an object: number of spheres (default 32)
-DEFAULT_SPHERES = 32
 SQRT_PI = float(np.sqrt(np.pi))
 SETTLED_KEY = "relight_settled"        # on a settled image: its channels' lamps; on the group:
 SETTLED_FITS = "relight_settled_fits"  # the objects' fit hashes it was computed for
@@ -67,108 +69,10 @@ SETTLE_TOLERANCE = 1e-4                # sum of |transform - settled transform|
 EEVEE_SPHERE_TESTS = 128
 
 
-def _prop(obj, name, default):
-    """A plain custom property set from a script, else the add-on's property.  Only a string
-    is read raw for the enum: Blender before 5.0 keeps an enum property's value as its index
-    in the same ID property, which a raw read would take for the value."""
-    raw = obj.get(name) if hasattr(obj, "get") else None
-    if isinstance(raw, str) or (isinstance(default, int) and isinstance(raw, int)
-                                and not isinstance(raw, bool)):
-        return raw
-    return getattr(obj, name, default)
-
-
-def moving(obj) -> bool:
-    """A virtual object whose shadows follow it at render time (spheres)."""
-    from .read import object_role
-    return (obj.type == "MESH" and object_role(obj) == "virtual"
-            and _prop(obj, SHADOW_PROPERTY, "EXACT") == "SPHERES")
-
-
-def sphere_count(obj) -> int:
-    return max(1, min(512, int(_prop(obj, COUNT_PROPERTY, DEFAULT_SPHERES))))
-
-
-def moving_objects(scene):
-    return [o for o in scene.objects if moving(o) and not o.hide_render]
-
-
 # -- drivers ---------------------------------------------------------------------------------
 
 def _transform_vars(obj, what):
     return [(w.lower().replace("_", ""), "TRANSFORMS", obj, w) for w in what]
-
-
-# -- node helpers ------------------------------------------------------------------------------
-
-class _Builder:
-    def __init__(self, tree):
-        self.tree, self.x = tree, 0
-
-    def math(self, op, a, b=None, value=None):
-        n = self.tree.nodes.new("ShaderNodeMath")
-        n.operation = op
-        n.location = (self.x, 0)
-        self.x += 10
-        for i, v in enumerate((a, b)):
-            if v is None:
-                continue
-            if isinstance(v, (int, float)):
-                n.inputs[i].default_value = float(v)
-            else:
-                self.tree.links.new(v, n.inputs[i])
-        return n.outputs[0]
-
-    def vmath(self, op, a, b=None, scale=None):
-        n = self.tree.nodes.new("ShaderNodeVectorMath")
-        n.operation = op
-        n.location = (self.x, -200)
-        self.x += 10
-        for i, v in enumerate((a, b)):
-            if v is None:
-                continue
-            if isinstance(v, (tuple, list, np.ndarray)):
-                n.inputs[i].default_value = [float(c) for c in v]
-            else:
-                self.tree.links.new(v, n.inputs[i])
-        if scale is not None:
-            if isinstance(scale, (int, float)):
-                n.inputs["Scale"].default_value = float(scale)
-            else:
-                self.tree.links.new(scale, n.inputs["Scale"])
-        out = n.outputs["Value"] if op in ("LENGTH", "DOT_PRODUCT") else n.outputs["Vector"]
-        return out
-
-    def smoothstep(self, x):
-        n = self.tree.nodes.new("ShaderNodeMapRange")
-        n.data_type = "FLOAT"
-        n.interpolation_type = "SMOOTHSTEP"
-        n.clamp = True
-        n.location = (self.x, 0)
-        self.x += 10
-        n.inputs["From Min"].default_value = 0.0
-        n.inputs["From Max"].default_value = 1.0
-        n.inputs["To Min"].default_value = 0.0
-        n.inputs["To Max"].default_value = 1.0
-        self.tree.links.new(x, n.inputs["Value"])
-        return n.outputs["Result"]
-
-    def one_minus_cos(self, s):
-        sq = self.math("MULTIPLY", s, s)
-        root = self.math("SQRT", self.math("SUBTRACT", 1.0, sq))
-        return self.math("DIVIDE", sq, self.math("ADD", 1.0, root))
-
-
-def _new_group(name, inputs, outputs, key):
-    ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    for sock_name, kind in inputs:
-        ng.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind)
-    for sock_name, kind in outputs:
-        ng.interface.new_socket(sock_name, in_out="OUTPUT", socket_type=kind)
-    gin = ng.nodes.new("NodeGroupInput")
-    gout = ng.nodes.new("NodeGroupOutput")
-    _tag(ng, key)
-    return ng, gin, gout
 
 
 # -- lamps -------------------------------------------------------------------------------------
@@ -187,7 +91,7 @@ def _area_radius_expression(light):
 def make_lamp_group(name, key, obj=None, centre=None, radius=0.0):
     """The node group of lamp ``name``: outputs its world position and radius (driven from the
     light object ``obj``, or the constants ``centre`` / ``radius`` of an emissive-face lamp)."""
-    ng, gin, gout = _new_group(f"Relight Lamp {name}", [],
+    ng, gin, gout = new_group(f"Relight Lamp {name}", [],
                                [("Position", "NodeSocketVector"), ("Radius", "NodeSocketFloat")],
                                key)
     ng[LAMP_KEY] = name
@@ -247,7 +151,7 @@ def emissive_disk(scene_data, k):
 
 def lamp_groups(key):
     return {ng[LAMP_KEY]: ng for ng in bpy.data.node_groups
-            if LAMP_KEY in ng and ng.get("relight_scene") == key}
+            if LAMP_KEY in ng and ng.get(ids.SCENE_KEY) == key}
 
 
 # -- objects -----------------------------------------------------------------------------------
@@ -282,16 +186,16 @@ def cap_group(key):
     """The shared node group of one sphere (sphere_shadow.cap_visibility's blocked part b, in
     the object's frame): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b)."""
     for ng in bpy.data.node_groups:
-        if ng.get(CAP_KEY) == CAP_VERSION and ng.get("relight_scene") == key:
+        if ng.get(CAP_KEY) == CAP_VERSION and ng.get(ids.SCENE_KEY) == key:
             return ng
     vec, flt = "NodeSocketVector", "NodeSocketFloat"
-    ng, gin, gout = _new_group(CAP_GROUP, [
+    ng, gin, gout = new_group(CAP_GROUP, [
         ("Position", vec), ("To Lamp", vec), ("Lamp Distance", flt), ("Lamp Angle", flt),
         ("Lamp Cap", flt), ("Centre", vec), ("Radius", flt), ("Product", flt), ("Max", flt),
         ("Part", flt)], [("Product", flt), ("Max", flt)], key)
     ng[CAP_KEY] = CAP_VERSION
     ng.use_fake_user = True
-    b = _Builder(ng)
+    b = Builder(ng)
     i = gin.outputs
     # the centre waits for the previous sphere's product (x 1e-30: no change in float32)
     c = b.vmath("MULTIPLY_ADD", i["Product"], (1e-30, 1e-30, 1e-30))
@@ -319,7 +223,7 @@ def cap_group(key):
 
 def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)."""
-    ng, gin, gout = _new_group(f"Relight Spheres {obj.name}",
+    ng, gin, gout = new_group(f"Relight Spheres {obj.name}",
                                [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
                                 ("Lamp Radius", "NodeSocketFloat")],
                                [("Visibility", "NodeSocketFloat")], key)
@@ -328,7 +232,7 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
     if hull is not None:
         ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
-    b = _Builder(ng)
+    b = Builder(ng)
     tree = ng.nodes
     # The object's world transform, driven: location, conjugate rotation (u, w), 1 / scale.
     loc = tree.new("ShaderNodeCombineXYZ")
@@ -367,10 +271,8 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     cap = cap_group(key)
 
     def cap_node(centre, radius, product, maximum, part):
-        g = tree.new("ShaderNodeGroup")
+        g = b.node("ShaderNodeGroup")
         g.node_tree = cap
-        g.location = (b.x, -400)
-        b.x += 10
         for name, sock in (("Position", p), ("To Lamp", to_l), ("Lamp Distance", d_l),
                            ("Lamp Angle", th_l), ("Lamp Cap", om_l)):
             ng.links.new(sock, g.inputs[name])
@@ -414,7 +316,7 @@ def group_spheres(ng):
 def sphere_groups(key):
     """{object name: its sphere group} of the scene with ``key``."""
     return {ng[OBJECT_KEY]: ng for ng in bpy.data.node_groups
-            if OBJECT_KEY in ng and ng.get("relight_scene") == key}
+            if OBJECT_KEY in ng and ng.get(ids.SCENE_KEY) == key}
 
 
 # -- settled shadows ---------------------------------------------------------------------------
@@ -434,11 +336,11 @@ def settled_run(objs) -> str:
 def settled_group(key):
     """The scene's "Relight Settled" group, or None."""
     return next((ng for ng in bpy.data.node_groups
-                 if SETTLED_FITS in ng and ng.get("relight_scene") == key), None)
+                 if SETTLED_FITS in ng and ng.get(ids.SCENE_KEY) == key), None)
 
 
 def _settled_images(key):
-    return [im for im in bpy.data.images if SETTLED_KEY in im and _ours(im, key)]
+    return [im for im in bpy.data.images if SETTLED_KEY in im and ids.ours(im, key)]
 
 
 def drop_settled(key):
@@ -451,7 +353,7 @@ def drop_settled(key):
 
 def make_settled_group(objs, fits, key):
     """A group whose output is 1 while every object of ``objs`` keeps its present transform."""
-    ng, _, gout = _new_group(SETTLED_GROUP, [], [("Settled", "NodeSocketFloat")], key)
+    ng, _, gout = new_group(SETTLED_GROUP, [], [("Settled", "NodeSocketFloat")], key)
     ng[SETTLED_FITS] = dict(fits)
     ng["relight_settled_run"] = settled_run(objs)
     ng.use_fake_user = True
@@ -492,7 +394,7 @@ def settle(scene, result, objs, fits, depsgraph, key, seed=0):
     V = object_visibility(sc, tm, np.concatenate(tris), seed=seed)
     names = list(sc.lamp_names)
     per_image = visibility_images(tm, V)
-    writer = _HalfWriter(key)
+    writer = MapWriter(key)
     try:
         for i, v in enumerate(per_image):
             if i not in result.maps or float(v.min(initial=1.0)) >= 0.999:
@@ -700,7 +602,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
         flag_group = None
     settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
-    mats = [m for m in bpy.data.materials if _ours(m, key) and m.node_tree is not None]
+    mats = [m for m in bpy.data.materials if ids.ours(m, key) and m.node_tree is not None]
     wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
     tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
     warnings = []

@@ -41,29 +41,40 @@ the DRB97 baseline, ``T`` is the original image and ``M_k = B_k / sum_k B_k``, t
 """
 from __future__ import annotations
 
-import uuid
+from dataclasses import dataclass
 
 import bpy
 import numpy as np
 
 from ..core.relight.maps import DISPLAY_EPS, SEAM_PIXELS, map_images, ratio_maps
 from ..core.texture.mapping import rasterize_patches
+from . import ids, materials
+from .drivers import ratio_driver
+from .images import CONTENT, MapWriter
+from .nodes import Builder
 
-GENERATED = "relight_generated"
-SCENE_KEY = "relight_scene"         # on generated datablocks: the key of their scene
-SCENE_ID = "relight_id"             # on a scene: its key
-SCENE_OWNER = "relight_id_owner"    # on a scene: the name it had when the key was made
-ORIGINAL = "relight_original"       # on a relit material: the user's material (keeps it alive)
-OBJECT_LINKS = "relight_object_slots"  # on a relit material: override objects whose slot we linked
-POWER0 = "relight_power0"
-HALF_MAX = 65504.0
 T_NODE = "T"
 MAP_PREFIX = "M "          # the node of lamp k's map image: "M <lamp name>"
 SHADOW_PREFIX = "S "       # lamp k's moving-shadow factor: "S <lamp name>" (Scale input)
-MAP_SOURCE = "relight_map_source"   # on a map image: the photo's name (names may be renamed)
-MAP_LAMP = "relight_map_lamp"       # on a map image: its lamp's name
-MAT_SUFFIX = ".relight"
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
+
+
+@dataclass
+class LampTerm:
+    """One lamp of the maps as the relit materials follow it: its label, the light object it
+    follows (None for an emissive mesh or a lamp whose light is gone), the power ``p0`` and
+    colour ``color0`` its map was computed at, an emissive mesh's strength (material, node,
+    input, strength then), and whether its light was deleted (then its term is off)."""
+    label: str
+    obj: object = None
+    p0: float = 1.0
+    color0: tuple = (1.0, 1.0, 1.0)
+    strength: tuple | None = None
+    gone: bool = False
+
+    @property
+    def light(self):
+        return self.obj.data if self.obj is not None else None
 
 
 # -- maths (numpy only) ------------------------------------------------------------------------
@@ -90,115 +101,6 @@ def _overlap_warnings(scene_data, tm):
 
 # -- bpy helpers -------------------------------------------------------------------------------
 
-def _is_generated(idb) -> bool:
-    return bool(idb.get(GENERATED, 0))
-
-
-def _tag(idb, key):
-    idb[GENERATED] = 1
-    idb[SCENE_KEY] = key
-
-
-def scene_key(scene, create=False):
-    """The key that ties generated data to ``scene`` (made on the first write; ``create`` is
-    only allowed where ID properties may be written, never in a poll or a draw).  A copied
-    scene (Full Copy) carries its original's key: the key stays with the scene that still has
-    the name it was made under, and the copy gets its own on its first write."""
-    key = scene.get(SCENE_ID)
-    if key is not None and scene.get(SCENE_OWNER) != scene.name:
-        if any(s != scene and s.get(SCENE_ID) == key and s.get(SCENE_OWNER) == s.name
-               for s in bpy.data.scenes):
-            key = None                               # a copy: not its key
-        elif create:
-            scene[SCENE_OWNER] = scene.name          # renamed
-    if key is None and create:
-        key = scene[SCENE_ID] = uuid.uuid4().hex
-        scene[SCENE_OWNER] = scene.name
-    return key
-
-
-def _ours(idb, key) -> bool:
-    return key is not None and _is_generated(idb) and idb.get(SCENE_KEY) == key
-
-
-def original_material(mat):
-    """The user's material behind a relit one (``mat`` itself when it is not relit)."""
-    for _ in range(8):                       # a relit material is never relit again; be safe
-        if mat is None or not _is_generated(mat):
-            return mat
-        nxt = mat.get(ORIGINAL)
-        if nxt is None:                      # relit data written before the reference existed
-            nxt = bpy.data.materials.get(mat.name[: -len(MAT_SUFFIX)]) \
-                if mat.name.endswith(MAT_SUFFIX) else None
-        mat = nxt
-    return None
-
-
-def _float_image(name, rgb, alpha=None):
-    hh, ww = rgb.shape[:2]
-    img = bpy.data.images.new(name, ww, hh, alpha=True, float_buffer=True)
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"        # alpha is data (the direct fraction), not coverage
-    rgba = np.ones((hh, ww, 4), np.float32)
-    rgba[..., :3] = rgb
-    if alpha is not None:
-        rgba[..., 3] = alpha
-    img.pixels.foreach_set(rgba.reshape(-1))
-    return img
-
-
-class _HalfWriter:
-    """Half-float OpenEXR through ``Image.save_render`` with a temporary scene whose output
-    settings are EXR / 16 bit / ZIP (``Image.save`` + ``use_half_precision`` writes 32-bit
-    float in Blender 5.0.1: measured from the EXR channel list).  The file is loaded, packed
-    and deleted; the image keeps the relative path ``//relight/<name>.exr`` for unpacking.
-    Linear EXR output gets no view transform (values above 1 round-trip unchanged)."""
-
-    def __init__(self, key):
-        import tempfile
-        self.key = key
-        self.dir = tempfile.mkdtemp(prefix="relight_")
-        self.scene = bpy.data.scenes.new("relight_tmp_exr_settings")
-        s = self.scene.render.image_settings
-        s.file_format = "OPEN_EXR"
-        s.color_mode = "RGBA"
-        s.color_depth = "16"
-        s.exr_codec = "ZIP"
-
-    def write(self, name, rgb, alpha=None):
-        import os
-        rgb = np.clip(np.nan_to_num(rgb), -HALF_MAX, HALF_MAX)   # half floats end at 65504
-        if alpha is not None:
-            alpha = np.clip(np.nan_to_num(alpha, nan=1.0), 0.0, 1.0)
-        tmp = _float_image("relight_tmp_image", rgb, alpha)
-        path = os.path.join(self.dir, "image.exr")
-        try:
-            tmp.save_render(path, scene=self.scene)
-            img = bpy.data.images.load(path, check_existing=False)
-            img.colorspace_settings.name = "Non-Color"
-            img.alpha_mode = "CHANNEL_PACKED"
-            img.pack()
-            img.name = name
-            img.filepath_raw = f"//relight/{bpy.path.clean_name(name)}.exr"
-        except Exception:       # fall back to a packed 32-bit float image
-            img = None
-        finally:
-            bpy.data.images.remove(tmp)
-            if os.path.exists(path):
-                os.remove(path)
-        if img is None:
-            img = _float_image(name, rgb, alpha)
-            img.file_format = "OPEN_EXR"
-            img.pack()
-        _tag(img, self.key)
-        return img
-
-    def close(self):
-        import shutil
-        bpy.data.scenes.remove(self.scene)
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
 def _upstream(node, keep):
     if node is None or node in keep:
         return
@@ -215,52 +117,14 @@ def _source_image_node(tree, image_name):
     return (linked or cands or [None])[0]
 
 
-def add_driver(socket, expression, variables):
-    """A SCRIPTED driver on ``socket``'s default value:
-    ``expression`` over ``variables``, each (name, kind, target, what): kind "TRANSFORMS" reads
-    the world-space transform channel ``what`` of the object ``target`` (rotations as a
-    quaternion), any other kind is the ID type of ``target`` whose property at the data path
-    ``what`` is read.  Kept to simple expressions, drivers run without Python (auto-run off, no
-    extension)."""
-    fc = socket.driver_add("default_value")
-    for mod in list(fc.modifiers):
-        fc.modifiers.remove(mod)
-    drv = fc.driver
-    drv.type = "SCRIPTED"
-    for name, kind, target, what in variables:
-        var = drv.variables.new()
-        var.name = name
-        t = var.targets[0]
-        if kind == "TRANSFORMS":
-            var.type = "TRANSFORMS"
-            t.id = target
-            t.transform_type = what
-            t.transform_space = "WORLD_SPACE"
-            if what.startswith("ROT"):
-                t.rotation_mode = "QUATERNION"
-        else:
-            var.type = "SINGLE_PROP"
-            t.id_type = kind
-            t.id = target
-            t.data_path = what
-    drv.expression = expression
-    return fc
-
-
-def _ratio_driver(socket, var, kind, idb, data_path, value0):
-    """``socket`` follows a property (the variable ``var``) over its value ``value0`` at
-    precompute: ``var / value0``."""
-    return add_driver(socket, f"{var} / {float(value0)!r}", [(var, kind, idb, data_path)])
-
-
 def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=None):
-    """maps: list of bpy images (one per lamp); lamps: list of (name, light data or None, P0);
-    t_image: the shadow-free texture T_final (None: the original image is T); uv_map: the UV
-    map the reader used for this material (its UV Map nodes are pointed at it)."""
+    """The relit copy of ``orig``: ``maps`` one bpy image per lamp, ``lamps`` their LampTerms,
+    ``t_image`` the shadow-free texture T_final (None: the original image is T), ``uv_map`` the
+    UV map the reader used for this material (its UV Map nodes are pointed at it)."""
     mat = orig.copy()
-    mat.name = orig.name + MAT_SUFFIX
-    _tag(mat, key)
-    mat[ORIGINAL] = orig
+    mat.name = orig.name + ids.MAT_SUFFIX
+    ids.tag(mat, key)
+    mat[ids.ORIGINAL] = orig
     if _LEGACY_USE_NODES:
         mat.use_nodes = True
     tree = mat.node_tree
@@ -287,234 +151,148 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
             if node.bl_idname == "ShaderNodeUVMap" and node.uv_map != uv_map:
                 node.uv_map = uv_map
     tex.name, tex.label = T_NODE, "T_final" if t_image is not None else "T (original)"
-    x0 = tex.location.x + 300
-    y0 = tex.location.y
+    b = Builder(tree, tex.location.x + 300, tex.location.y)
     total = None
-    for j, (img, (lname, ldata, p0, *strength)) in enumerate(zip(maps, lamps)):
-        y = y0 - 300 * (j + 1)
-        mnode = tree.nodes.new("ShaderNodeTexImage")
-        mnode.image = img
-        mnode.name = mnode.label = f"{MAP_PREFIX}{lname}"
-        mnode.interpolation = tex.interpolation
-        mnode.extension = tex.extension
-        mnode.location = (x0, y)
+    for j, (img, lamp) in enumerate(zip(maps, lamps)):
+        # one row of columns per lamp: map, intensity, colour, shadow factor, sum
+        b.at(col=0, row=1 + 2 * j)
+        mnode = b.node("ShaderNodeTexImage", f"{MAP_PREFIX}{lamp.label}", image=img,
+                       interpolation=tex.interpolation, extension=tex.extension)
         if vec_src is not None:
-            links.new(vec_src, mnode.inputs["Vector"])
-        val = tree.nodes.new("ShaderNodeValue")
-        val.name = val.label = f"I {lname}"
-        val.location = (x0, y - 180)
+            b.link(vec_src, mnode.inputs["Vector"])
+        val = b.node("ShaderNodeValue", f"I {lamp.label}")
         val.outputs[0].default_value = 1.0
-        if ldata is not None and p0 > 0:
-            _ratio_driver(val.outputs[0], "p", "LIGHT", ldata, "energy", p0)
-        elif strength and strength[0][3] > 0:
-            material, node_name, input_name, s0 = strength[0]
-            _ratio_driver(val.outputs[0], "s", "MATERIAL", material,
-                          f'node_tree.nodes["{node_name}"].inputs["{input_name}"].default_value',
-                          s0)
-        elif ldata is not None:  # lamp off at precompute time: its basis is 0 anyway
+        if lamp.gone:           # its light was deleted: the lamp is off
             val.outputs[0].default_value = 0.0
-        scale = tree.nodes.new("ShaderNodeVectorMath")
-        scale.operation = "SCALE"
-        scale.location = (x0 + 300, y)
-        links.new(mnode.outputs["Color"], scale.inputs[0])
-        links.new(val.outputs[0], scale.inputs["Scale"])
+        elif lamp.light is not None and lamp.p0 > 0:
+            ratio_driver(val.outputs[0], "p", "LIGHT", lamp.light, "energy", lamp.p0)
+        elif lamp.strength is not None and lamp.strength[3] > 0:
+            material, node_name, input_name, s0 = lamp.strength
+            ratio_driver(val.outputs[0], "s", "MATERIAL", material,
+                         f'node_tree.nodes["{node_name}"].inputs["{input_name}"].default_value',
+                         s0)
+        elif lamp.light is not None:  # lamp off at precompute time: its basis is 0 anyway
+            val.outputs[0].default_value = 0.0
+        b.column().at(row=1 + 2 * j)
+        scale = b.node("ShaderNodeVectorMath", operation="SCALE")
+        b.link(mnode.outputs["Color"], scale.inputs[0])
+        b.link(val.outputs[0], scale.inputs["Scale"])
         term = scale.outputs[0]
-        if ldata is not None:       # the light's colour, relative to its colour at precompute
-            colour = tree.nodes.new("ShaderNodeCombineXYZ")
-            colour.name = colour.label = f"C {lname}"
-            colour.location = (x0 + 300, y - 180)
-            c0 = list(ldata.color)
+        if lamp.light is not None and not lamp.gone:
+            # the light's colour, relative to its colour when the map was computed
+            colour = b.node("ShaderNodeCombineXYZ", f"C {lamp.label}")
             for ch in range(3):
                 colour.inputs[ch].default_value = 1.0
-                if c0[ch] > 0:
-                    _ratio_driver(colour.inputs[ch], "c", "LIGHT", ldata, f"color[{ch}]",
-                                  c0[ch])
-            tint = tree.nodes.new("ShaderNodeVectorMath")
-            tint.operation = "MULTIPLY"
-            tint.location = (x0 + 420, y)
-            links.new(term, tint.inputs[0])
-            links.new(colour.outputs[0], tint.inputs[1])
+                if lamp.color0[ch] > 0:
+                    ratio_driver(colour.inputs[ch], "c", "LIGHT", lamp.light, f"color[{ch}]",
+                                 lamp.color0[ch])
+            b.column().at(row=1 + 2 * j)
+            tint = b.node("ShaderNodeVectorMath", operation="MULTIPLY")
+            b.link(term, tint.inputs[0])
+            b.link(colour.outputs[0], tint.inputs[1])
             term = tint.outputs[0]
         # The moving objects' shadows (sphere_nodes.py link their factor here; 1 without)
-        shadow = tree.nodes.new("ShaderNodeVectorMath")
-        shadow.operation = "SCALE"
-        shadow.name = shadow.label = f"{SHADOW_PREFIX}{lname}"
-        shadow.location = (x0 + 460, y - 120)
+        b.at(col=3, row=1 + 2 * j)
+        shadow = b.node("ShaderNodeVectorMath", f"{SHADOW_PREFIX}{lamp.label}",
+                        operation="SCALE")
         shadow.inputs["Scale"].default_value = 1.0
-        links.new(term, shadow.inputs[0])
+        b.link(term, shadow.inputs[0])
         term = shadow.outputs[0]
         if total is None:
             total = term
         else:
-            add = tree.nodes.new("ShaderNodeVectorMath")
-            add.operation = "ADD"
-            add.location = (x0 + 500, y)
-            links.new(total, add.inputs[0])
-            links.new(term, add.inputs[1])
+            b.at(col=4, row=1 + 2 * j)
+            add = b.node("ShaderNodeVectorMath", operation="ADD")
+            b.link(total, add.inputs[0])
+            b.link(term, add.inputs[1])
             total = add.outputs[0]
-    mul = tree.nodes.new("ShaderNodeVectorMath")
-    mul.operation = "MULTIPLY"
-    mul.location = (x0 + 700, y0)
-    links.new(tex.outputs["Color"], mul.inputs[0])
+    b.at(col=5, row=0)
+    mul = b.node("ShaderNodeVectorMath", operation="MULTIPLY")
+    b.link(tex.outputs["Color"], mul.inputs[0])
     if total is not None:
-        links.new(total, mul.inputs[1])
-    emit = tree.nodes.new("ShaderNodeEmission")
-    emit.location = (x0 + 900, y0)
+        b.link(total, mul.inputs[1])
+    b.column()
+    emit = b.node("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = 1.0
-    links.new(mul.outputs[0], emit.inputs["Color"])
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.location = (x0 + 1100, y0)
-    out.target = "ALL"
-    links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    b.link(mul.outputs[0], emit.inputs["Color"])
+    b.column()
+    out = b.node("ShaderNodeOutputMaterial", target="ALL")
+    b.link(emit.outputs["Emission"], out.inputs["Surface"])
     out.is_active_output = True
     return mat
 
 
 # -- scene-scoped state ------------------------------------------------------------------------
 
-def _scene_objects(scene):
-    """The objects of ``scene``, and those of the collections its objects instance."""
-    seen, todo, out = set(), list(scene.objects), []
-    while todo:
-        obj = todo.pop()
-        if obj.name_full in seen:
-            continue
-        seen.add(obj.name_full)
-        out.append(obj)
-        coll = obj.instance_collection if obj.instance_type == "COLLECTION" else None
-        if coll is not None:
-            todo.extend(coll.all_objects)
-    return out
-
-
-def _relit_slots(scene):
-    """(object, slot index, relit material) for every slot of ``scene``'s objects that holds a
-    relit material."""
-    for obj in _scene_objects(scene):
-        for i, slot in enumerate(obj.material_slots):
-            if slot.material is not None and _is_generated(slot.material):
-                yield obj, i, slot.material
-
-
-def restore_originals(scene) -> int:
-    """Put the original materials back in every slot of ``scene``'s objects that holds a relit
-    material (an override object's slot goes back to its mesh).  Returns the number of slots
-    restored.  Relit materials and images are kept until Clear (to compare, or to reassign by
-    hand)."""
-    count = 0
-    for obj, i, mat in list(_relit_slots(scene)):
-        slot = obj.material_slots[i]
-        orig = original_material(mat)
-        if orig is None:
-            continue
-        slot.material = orig
-        if obj.name in mat.get(OBJECT_LINKS, ()) and slot.link == "OBJECT":
-            slot.link = "DATA"
-        count += 1
-    return count
-
-
-def clear_relight_data(scene, keep_volume=False) -> dict:
+def clear_relight_data(scene, keep_volume=False, keep_images=()) -> dict:
     """Restore ``scene``'s originals, then remove the materials and images generated for it (and
     generated ones nothing uses any more, e.g. copies made by a Full Copy of the scene) and the
-    stored powers of its lights.  Other scenes' results and the user's data are untouched."""
-    key = scene_key(scene)
-    restored = restore_originals(scene)
-    mats = [m for m in bpy.data.materials if _ours(m, key) or (_is_generated(m) and m.users == 0)]
+    stored powers of its lights.  Other scenes' results and the user's data are untouched.
+    ``keep_images``: images to leave (a write about to take them again)."""
+    key = ids.scene_key(scene)
+    restored = materials.restore_originals(scene)
+    # and generated data nothing uses (a relit material another scene sharing objects with this
+    # one took the slots of has a fake user: it stays for that scene)
+    mats = [m for m in bpy.data.materials
+            if ids.ours(m, key) or (ids.is_generated(m) and m.users == 0)]
     for m in mats:
         bpy.data.materials.remove(m)
-    imgs = [im for im in bpy.data.images if _ours(im, key) or (_is_generated(im) and im.users == 0)]
+    keep = {im.as_pointer() for im in keep_images}
+    imgs = [im for im in bpy.data.images if im.as_pointer() not in keep and
+            (ids.ours(im, key) or (ids.is_generated(im) and im.users == 0))]
     for im in imgs:
         bpy.data.images.remove(im)
-    groups = [g for g in bpy.data.node_groups if _ours(g, key)]    # lamp and sphere groups
+    groups = [g for g in bpy.data.node_groups if ids.ours(g, key)]    # lamp and sphere groups
     for g in groups:
         bpy.data.node_groups.remove(g)
-    for obj in [o for o in bpy.data.objects if _ours(o, key) and not keep_volume]:  # EEVEE's volume
+    for obj in [o for o in bpy.data.objects if ids.ours(o, key) and not keep_volume]:  # EEVEE's
         data = obj.data
         bpy.data.objects.remove(obj)
         if isinstance(data, bpy.types.LightProbe) and data.users == 0:
             bpy.data.lightprobes.remove(data)
     lights = 0
     for obj in scene.objects:
-        if obj.type == "LIGHT" and POWER0 in obj.data and _editable(obj.data):
-            del obj.data[POWER0]
+        if obj.type == "LIGHT" and ids.POWER0 in obj.data and ids.editable(obj.data):
+            del obj.data[ids.POWER0]
             lights += 1
     return {"restored_slots": restored, "materials": len(mats), "images": len(imgs),
             "lights": lights}
 
 
 def has_relight_data(scene) -> bool:
-    key = scene_key(scene)
-    return any(_ours(m, key) for m in bpy.data.materials)
-
-
-def relit_slot_count(scene) -> int:
-    return sum(1 for _ in _relit_slots(scene))
-
-
-def _editable(idb) -> bool:
-    if idb is None:
-        return True
-    return bool(getattr(idb, "is_editable", idb.library is None)) and idb.library is None
-
-
-def slot_access(obj):
-    """How ``obj``'s material slots can be reassigned: "direct" (local data), "override" (a
-    library-override object whose linked mesh holds the slots: an object-level slot is used),
-    or None (linked, read-only)."""
-    if not _editable(obj):
-        return None
-    if all(_editable(obj.data if slot.link == "DATA" else obj) for slot in obj.material_slots):
-        return "direct"
-    return "override" if obj.override_library is not None else None
-
-
-def slots_editable(obj) -> bool:
-    return slot_access(obj) is not None
+    key = ids.scene_key(scene)
+    return any(ids.ours(m, key) for m in bpy.data.materials)
 
 
 # -- entry point -------------------------------------------------------------------------------
 
-def write_results(context, scene_data, report, solution) -> dict:
+def write_results(context, scene_data, report, solution, lamps) -> dict:
     """Write the display maps and relit materials for ``context.scene``, replacing its previous
-    result.  ``report`` is the ReadReport of the same read (groups, lamps, UV maps, sources).
+    result.  ``report`` is the ReadReport of the same read (groups, UV maps, sources);
+    ``lamps`` one LampTerm per lamp of ``solution`` (a ShadowFreeResult), in its maps' order.
 
-    ``solution``: a ShadowFreeResult (T_final and M_k per image; T_final is written as
-    ``"<image>.relight.T"`` unless the correction was off).
-    Returns a summary dict (images, materials, objects, lamps, slots, warnings)."""
+    T_final is written as ``"<image>.relight.T"`` unless the correction was off.  Returns a
+    summary dict (images, materials, objects, lamps, slots, warnings)."""
     from . import sphere_nodes
     scene = context.scene
     warnings = []
-    key = scene_key(scene, create=True)
-    clear_relight_data(scene, keep_volume=True)     # its bake is the user's to redo or keep
+    key = ids.scene_key(scene, create=True)
+    # the maps and textures written before: taken again where they hold the same values
+    old = {im.name: im for im in bpy.data.images if ids.ours(im, key) and CONTENT in im
+           and (ids.MAP_SOURCE in im or im.name.endswith(".relight.T"))}
+    clear_relight_data(scene, keep_volume=True, keep_images=old.values())  # (the EEVEE volume's
+    # bake is the user's to redo or keep)
 
-    # Lamps, in the result's order (its maps' order): light data and the power each map is
-    # computed at (P0 of the driver p / P0).
-    lamps = []
-    sources = {src["name"]: src for src in report.lamp_sources}
-    for name in solution.solution.scene.lamp_names:
-        src = sources.get(name, {})
-        obj = bpy.data.objects.get(src.get("object", name))
-        if obj is not None and obj.type == "LIGHT":
-            p0 = float(src.get("power_ref", obj.data.energy))
-            if _editable(obj.data):
-                obj.data[POWER0] = p0
-            lamps.append((name, obj.data, p0))
-        elif src.get("kind") == "emissive" and len(src.get("strength", ())) == 3 and \
-                bpy.data.materials.get(src.get("material") or "") is not None:
-            # an emissive mesh follows its material's emission Strength (I = s / s0)
-            lamps.append((name, None, 1.0, (bpy.data.materials[src["material"]],
-                                            *src["strength"])))
-        else:
-            warnings.append(f"Lamp '{name}' is not a light object: its intensity is fixed at 1")
-            lamps.append((name, None, 1.0))
+    for lamp in lamps:
+        if lamp.light is not None and ids.editable(lamp.light):
+            lamp.light[ids.POWER0] = float(lamp.p0)
         # where moving objects' shadows (sphere_nodes.py) see the lamp from
-        if obj is not None and obj.type == "LIGHT":
-            sphere_nodes.make_lamp_group(name, key, obj)
-        elif name in scene_data.lamp_names:
-            centre, radius = sphere_nodes.emissive_disk(scene_data,
-                                                        scene_data.lamp_names.index(name))
-            sphere_nodes.make_lamp_group(name, key, None, centre, radius)
+        if lamp.obj is not None:
+            sphere_nodes.make_lamp_group(lamp.label, key, lamp.obj)
+        elif lamp.label in scene_data.lamp_names:
+            centre, radius = sphere_nodes.emissive_disk(
+                scene_data, scene_data.lamp_names.index(lamp.label))
+            sphere_nodes.make_lamp_group(lamp.label, key, None, centre, radius)
 
     # Materials with image faces (material name -> image index) and the objects using them.
     group = np.asarray(scene_data.group)
@@ -541,7 +319,7 @@ def write_results(context, scene_data, report, solution) -> dict:
         keep = set()
         for obj_name in sorted(mat_objects[mat_name]):
             obj = bpy.data.objects.get(obj_name)
-            if obj is not None and not slots_editable(obj):
+            if obj is not None and not materials.slots_editable(obj):
                 warnings.append(f"'{obj_name}' is linked from a library (read-only): its "
                                 "material is left as is; it still casts shadows")
                 continue
@@ -558,23 +336,29 @@ def write_results(context, scene_data, report, solution) -> dict:
 
     # Images, one per (used image, lamp).
     made_images, t_images = {}, {}
-    writer = _HalfWriter(key)
-    try:
+    with MapWriter(key, reuse=old) as writer:
         for i, m in solution.maps.items():
             if i not in used_images:
                 continue
             src = scene_data.images[i].name
             direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
             made_images[i] = []
-            for j, (lname, *_) in enumerate(lamps):
-                img = writer.write(f"{src}.relight.{lname}", m[j],
+            for j, lamp in enumerate(lamps):
+                img = writer.write(f"{src}.relight.{lamp.label}", m[j],
                                    None if direct is None else direct[j])
-                img[MAP_SOURCE], img[MAP_LAMP] = src, lname
+                img[ids.MAP_SOURCE], img[ids.MAP_LAMP] = src, lamp.label
                 made_images[i].append(img)
             if i in textures:
                 t_images[i] = writer.write(f"{src}.relight.T", textures[i])
-    finally:
-        writer.close()
+        for stale in writer.reuse.values():          # old maps nobody writes again
+            bpy.data.images.remove(stale)
+    if writer.full_float:
+        warnings.append(f"{len(writer.full_float)} image(s) hold values above 65504 (photos in "
+                        f"absolute units?): written as 32-bit float, not clipped "
+                        f"('{writer.full_float[0]}'...)")
+    if writer.non_finite:
+        warnings.append(f"{len(writer.non_finite)} image(s) had NaN or infinite values, written "
+                        f"as 0 ('{writer.non_finite[0]}'...): please report it")
 
     # Relit materials.
     relit = {}
@@ -600,17 +384,20 @@ def write_results(context, scene_data, report, solution) -> dict:
             obj = bpy.data.objects.get(obj_name)
             if obj is not None:
                 objects.add(obj)
+    others = [s for s in bpy.data.scenes if s != scene]
     for obj in sorted(objects, key=lambda o: o.name):
-        access = slot_access(obj)
-        for slot in obj.material_slots:
-            orig = original_material(slot.material)
+        for i, slot in enumerate(obj.material_slots):
+            shown = slot.material
+            orig = materials.original_material(shown)
             if orig is None or orig.name not in relit:
                 continue
-            new = relit[orig.name]
-            if access == "override" and slot.link == "DATA" and not _editable(obj.data):
-                slot.link = "OBJECT"
-                new[OBJECT_LINKS] = list(new.get(OBJECT_LINKS, ())) + [obj.name]
-            slot.material = new
+            if shown is not None and ids.is_generated(shown) and not ids.ours(shown, key):
+                sharing = [s.name for s in others if ids.ours(shown, ids.scene_key(s))]
+                warnings.append(f"'{obj.name}' is also in scene "
+                                f"'{sharing[0] if sharing else '?'}': it now shows this "
+                                "scene's relit material (Update there shows that scene's)")
+                shown.use_fake_user = True          # that scene's, kept for it
+            materials.assign(obj, i, relit[orig.name], key)
             assigned += 1
     report.warnings.extend(w for w in warnings if w not in report.warnings)
     return {"images": sum(len(v) for v in made_images.values()) + len(t_images),

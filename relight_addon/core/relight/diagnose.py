@@ -10,8 +10,10 @@ trusted, instead of a bare misfit number:
   outside [1 / OFF_FACTOR, OFF_FACTOR] while its uncertainty is below half of that): the user
   should check it (the message says whether the photo's estimate was used);
 * a lamp whose map is zero on every photographed texel (inside or behind geometry);
-* a lamp closer to a surface than TOUCHING (metres) or than its own radius: the light right
-  next to it is not resolved;
+* a lamp closer to a surface than TOUCHING of the scene's size or than its own radius: the
+  light right next to it is not resolved;
+* a lamp inside a closed object (every ray from it meets that object, and the camera is not
+  inside it too): it lights the object's inside only, which the photo does not show;
 * a light solve that stopped at its iteration bound without converging.
 """
 from __future__ import annotations
@@ -23,7 +25,9 @@ from .albedo import RHO_ESTIMATE_MAX
 
 CLIPPED_SHARE = 0.05
 OFF_FACTOR = 2.0
-TOUCHING = 0.01
+TOUCHING = 0.002            # of the scene's bounding diagonal (1 cm in a 5 m room)
+ENCLOSURE_RAYS = 64
+ENCLOSED_SHARE = 0.75       # of those rays meeting one object first: it closes the lamp in
 
 
 def clipped_surfaces(sol, use_patch, group_names):
@@ -77,6 +81,10 @@ def lamp_clearance(scene, lamp):
     emissive mesh's faces block light too)."""
     c = scene.corners[scene.occluder & (scene.lamp != lamp)]
     tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]])
+    # a triangle is a quad with two corners at one point: its second half has no area, and
+    # every point would be 0 away from it
+    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    tris = tris[area > 1e-12 * max(float(area.max(initial=0.0)), 1e-300)]
     if len(tris) == 0:
         return np.inf
     pts = []
@@ -95,6 +103,61 @@ def lamp_clearance(scene, lamp):
         return np.inf
     return min(float(_point_triangle_distance(np.asarray(p, float), tris).min()) for p in pts) \
         - radius
+
+
+def _fibonacci_sphere(n):
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def enclosing_group(scene, occluder, point):
+    """The patch group (object) closing every direction around ``point``, or None."""
+    if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
+        return None
+    d = _fibonacci_sphere(ENCLOSURE_RAYS)
+    t, prim = occluder.first_hit(np.broadcast_to(np.asarray(point, float), d.shape).copy(), d)
+    if np.any(prim < 0):
+        return None
+    # most rays meet the object first; the others a face coinciding with one of its own (a
+    # box's bottom lying on the floor)
+    groups, counts = np.unique(np.asarray(scene.group)[occluder.patch_of_triangle[prim]],
+                               return_counts=True)
+    best = int(np.argmax(counts))
+    return int(groups[best]) if counts[best] >= ENCLOSED_SHARE * len(prim) else None
+
+
+def _lamp_points(scene, lamp):
+    """Where lamp ``lamp`` emits from: its light's centre, or its patches' centres."""
+    lights = scene.lights
+    pts = [lights.position[i] for i in np.flatnonzero(lights.lamp == lamp)
+           if lights.kind[i] != 2]                                      # (a sun is outside)
+    sel = np.flatnonzero(scene.lamp == lamp)
+    if len(sel):
+        _, normal = scene.area_normal()
+        c = scene.corners[sel].mean(axis=1)
+        pts += list(c + 1e-4 * normal[sel])
+    return pts
+
+
+def enclosed_lamps(scene, occluder):
+    """{lamp: group of the closed object it is inside} (not the room the camera is in)."""
+    from ..geometry.extent import bounding_diagonal
+    out = {}
+    camera = None
+    if scene.viewpoint is not None:
+        camera = enclosing_group(scene, occluder, scene.viewpoint)
+    for k in range(scene.n_lamps):
+        pts = _lamp_points(scene, k)
+        if not pts:
+            continue
+        g = enclosing_group(scene, occluder, pts[0])
+        if g is not None and g != camera and \
+                bounding_diagonal(scene.corners[np.asarray(scene.group) == g]) > 0:
+            out[k] = g
+    return out
 
 
 def diagnose(result, use_patch, group_names=str) -> list:
@@ -143,10 +206,20 @@ def diagnose(result, use_patch, group_names=str) -> list:
         out.append(f"The light solve stopped without converging ({info.iterations} iterations, "
                    f"residual {info.residual:.1e}): the interreflections may be wrong (look for "
                    "surfaces that overlap or reflect almost all light)")
+    from ..geometry.extent import bounding_diagonal
+    touching = TOUCHING * bounding_diagonal(scene.corners)
+    inside = enclosed_lamps(result.scene if result.scene is not None else scene,
+                            result.occluder) if result.occluder is not None else {}
+    for k, g in inside.items():
+        out.append(f"Lamp '{names[k]}' is inside the closed object '{group_names(g)}': it "
+                   "lights only the object's inside, which the photo does not show (move it "
+                   "out, or make the object Ignored)")
     for k in range(len(names)):
-        if gap[k] < TOUCHING:
+        if k in inside:
+            continue
+        if gap[k] < touching:
             where = ("inside or touching a surface" if gap[k] <= 0
-                     else f"{1000 * gap[k]:.0f} mm from a surface")
+                     else f"{1000 * gap[k]:.2g} mm from a surface")
             out.append(f"Lamp '{names[k]}' is {where}: the light right next to it is not "
                        "resolved (move it away a little, or make it smaller)")
     return out

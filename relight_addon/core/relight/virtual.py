@@ -90,8 +90,8 @@ def add_lamps(result, lights: Lights, names, seed=0):
     # Per texel: direct by ray casting (the new lamps only), indirect from the new bases.
     opt = result.options
     texels_of = result.scene if result.scene is not None else sol.scene
-    light = result.texel_light(_only_lights(_with_lamps(texels_of, lights, names)[0], rows),
-                               opt.seed + 101)
+    texel_scene = _with_lamps(texels_of, lights, names)[0]
+    light = result.texel_light(_only_lights(texel_scene, rows), opt.seed + 101)
     new_maps, new_direct = lamp_maps(light, new_sol, np.arange(k0, k0 + m), s,
                                      result.denominator)
     maps = {i: np.concatenate([result.maps[i], new_maps[i]]) for i in result.maps}
@@ -105,8 +105,10 @@ def add_lamps(result, lights: Lights, names, seed=0):
         uncertainty=np.concatenate([est.uncertainty, np.full(m, np.nan)]),
         photo_weight=np.concatenate([est.photo_weight, np.zeros(m)]),
         equal=np.concatenate([est.equal, np.ones(m)]), nnls=np.concatenate([est.nnls, np.zeros(m)]))
+    # the texels' scene has every lamp of the maps: an object added later casts its change
+    # for each of them (object_change.texel_direct_change)
     return dataclasses.replace(result, maps=maps, lamps=lamps, solution=new_sol, direct=direct,
-                               room=None)
+                               room=None, scene=texel_scene if result.scene is not None else None)
 
 
 def keep_lamps(result, drop):
@@ -127,8 +129,11 @@ def keep_lamps(result, drop):
     lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
         "scale", "photo_ratio", "uncertainty", "photo_weight", "equal", "nnls")})
     direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
+    scene = None if result.scene is None else (
+        new_sol.scene if result.scene is sol.scene else result.scene.without_lamps(drop))
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
-                               lamps=lamps, solution=new_sol, direct=direct, room=None)
+                               lamps=lamps, solution=new_sol, direct=direct, room=None,
+                               scene=scene)
 
 
 def add_objects(result, scene, progress=None):

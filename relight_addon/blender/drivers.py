@@ -1,0 +1,58 @@
+"""Drivers that the relit materials and node groups evaluate at render time.
+
+Kept to simple expressions, they run with Python auto-run off and without the extension
+installed (render farms), which is why every live quantity goes through one.
+"""
+from __future__ import annotations
+
+
+def add_driver(socket, expression, variables):
+    """A SCRIPTED driver on ``socket``'s default value: ``expression`` over ``variables``, each
+    (name, kind, target, what): kind "TRANSFORMS" reads the world-space transform channel
+    ``what`` of the object ``target`` (rotations as a quaternion), any other kind is the ID
+    type of ``target`` whose property at the data path ``what`` is read."""
+    fc = socket.driver_add("default_value")
+    for mod in list(fc.modifiers):
+        fc.modifiers.remove(mod)
+    drv = fc.driver
+    drv.type = "SCRIPTED"
+    for name, kind, target, what in variables:
+        var = drv.variables.new()
+        var.name = name
+        t = var.targets[0]
+        if kind == "TRANSFORMS":
+            var.type = "TRANSFORMS"
+            t.id = target
+            t.transform_type = what
+            t.transform_space = "WORLD_SPACE"
+            if what.startswith("ROT"):
+                t.rotation_mode = "QUATERNION"
+        else:
+            var.type = "SINGLE_PROP"
+            t.id_type = kind
+            t.id = target
+            t.data_path = what
+    drv.expression = expression
+    return fc
+
+
+def ratio_expression(var, value0) -> str:
+    """``var / value0``: a property over its value when the map was computed."""
+    return f"{var} / {float(value0)!r}"
+
+
+def ratio_driver(socket, var, kind, idb, data_path, value0):
+    """``socket`` follows a property (the variable ``var``) over its value ``value0`` at
+    precompute: ``var / value0``."""
+    return add_driver(socket, ratio_expression(var, value0), [(var, kind, idb, data_path)])
+
+
+def drivers_reading(tree, idb, data_path):
+    """(F-curve, variable name) of the drivers of node tree ``tree`` that read ``data_path`` of
+    ``idb``."""
+    ad = tree.animation_data if tree is not None else None
+    for fc in (ad.drivers if ad else []):
+        for var in fc.driver.variables:
+            t = var.targets[0]
+            if t.id == idb and t.data_path == data_path:
+                yield fc, var.name

@@ -1,0 +1,107 @@
+"""One builder for every node graph Relight makes (relit materials, lamp, sphere and settled
+groups): nodes placed in columns as they are made, so no module spells layout offsets."""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from . import ids
+
+COLUMN = 220         # x step between the builder's columns
+ROW = 180            # y step between the rows of a column
+
+
+class Builder:
+    """Adds nodes to ``tree``: ``node(kind)`` in the current column (top to bottom), ``column()``
+    starts the next one; ``math`` / ``vmath`` / ``smoothstep`` make and link maths nodes."""
+
+    def __init__(self, tree, x=0.0, y=0.0):
+        self.tree, self.x0, self.y0 = tree, float(x), float(y)
+        self.col, self.row = 0, 0
+
+    def at(self, col=None, row=None):
+        """Move the cursor to column ``col`` and row ``row`` (None: keep)."""
+        if col is not None:
+            self.col = col
+        if row is not None:
+            self.row = row
+        return self
+
+    def column(self, step=1):
+        self.col += step
+        self.row = 0
+        return self
+
+    def location(self):
+        return (self.x0 + COLUMN * self.col, self.y0 - ROW * self.row)
+
+    def node(self, kind, name=None, label=None, **props):
+        n = self.tree.nodes.new(kind)
+        n.location = self.location()
+        self.row += 1
+        if name is not None:
+            n.name = name
+            n.label = name if label is None else label
+        elif label is not None:
+            n.label = label
+        for key, value in props.items():
+            setattr(n, key, value)
+        return n
+
+    def link(self, out, inp):
+        return self.tree.links.new(out, inp)
+
+    def _inputs(self, n, values):
+        for i, v in enumerate(values):
+            if v is None:
+                continue
+            if isinstance(v, (int, float)):
+                n.inputs[i].default_value = float(v)
+            elif isinstance(v, (tuple, list, np.ndarray)):
+                n.inputs[i].default_value = [float(c) for c in v]
+            else:
+                self.link(v, n.inputs[i])
+
+    def math(self, op, a, b=None, c=None):
+        n = self.node("ShaderNodeMath", operation=op)
+        self._inputs(n, (a, b, c))
+        return n.outputs[0]
+
+    def vmath(self, op, a, b=None, scale=None):
+        n = self.node("ShaderNodeVectorMath", operation=op)
+        self._inputs(n, (a, b))
+        if scale is not None:
+            if isinstance(scale, (int, float)):
+                n.inputs["Scale"].default_value = float(scale)
+            else:
+                self.link(scale, n.inputs["Scale"])
+        return n.outputs["Value"] if op in ("LENGTH", "DOT_PRODUCT") else n.outputs["Vector"]
+
+    def smoothstep(self, x):
+        n = self.node("ShaderNodeMapRange", data_type="FLOAT", interpolation_type="SMOOTHSTEP",
+                      clamp=True)
+        for name, value in (("From Min", 0.0), ("From Max", 1.0), ("To Min", 0.0),
+                            ("To Max", 1.0)):
+            n.inputs[name].default_value = value
+        self.link(x, n.inputs["Value"])
+        return n.outputs["Result"]
+
+    def one_minus_cos(self, s):
+        """1 - cos(asin s), as sphere_shadow._one_minus_cos (no cancellation for small caps)."""
+        sq = self.math("MULTIPLY", s, s)
+        root = self.math("SQRT", self.math("SUBTRACT", 1.0, sq))
+        return self.math("DIVIDE", sq, self.math("ADD", 1.0, root))
+
+
+def new_group(name, inputs, outputs, key):
+    """A shader node group tagged for the scene with ``key``: (group, its input node, its output
+    node); ``inputs`` / ``outputs``: (socket name, socket type) pairs."""
+    ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    for sock_name, kind in inputs:
+        ng.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind)
+    for sock_name, kind in outputs:
+        ng.interface.new_socket(sock_name, in_out="OUTPUT", socket_type=kind)
+    gin = ng.nodes.new("NodeGroupInput")
+    gout = ng.nodes.new("NodeGroupOutput")
+    ids.tag(ng, key)
+    return ng, gin, gout
