@@ -38,7 +38,7 @@ import numpy as np
 
 from .geometry.formfactor import point_to_polygon
 from .geometry.sampling import R2
-from .scene import quad_area_normal
+from .geometry.patch import quad_area_normal
 
 POINT, SPOT, SUN, AREA, POLYGON = 0, 1, 2, 3, 4
 KIND_NAMES = {POINT: "point", SPOT: "spot", SUN: "sun", AREA: "area", POLYGON: "polygon"}

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import quad_area_normal
+from .patch import quad_area_normal
+from .sampling import quadrature
 
 # Vertices closer than this (relative to the polygon size) to x are treated as touching x.
 _TINY = 1e-12
@@ -179,8 +180,6 @@ def patch_to_patch(recv_corners, src_corners, m: int = 8):
     recv_corners, src_corners (n, 4, 3).  Tensor Gauss rule with m x m Jacobian-weighted points on
     each receiver; exact point-to-polygon integration over each source.
     """
-    from .sampling import quadrature
-
     recv_corners = np.asarray(recv_corners, float)
     src_corners = np.asarray(src_corners, float)
     n = len(recv_corners)

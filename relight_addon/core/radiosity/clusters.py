@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import area_uniform_uv, jacobian_coefficients
-from ..scene import bilinear_point
 from .hierarchy import Hierarchy
 
 

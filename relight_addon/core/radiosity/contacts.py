@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..scene import quad_area_normal
+from ..geometry.patch import quad_area_normal
 from .hierarchy import Hierarchy
 from .links import _segment_ranges
 

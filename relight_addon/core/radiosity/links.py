@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.formfactor import point_kernel, point_to_polygon
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import (R2, area_uniform_uv, gauss_cells, jacobian_coefficients,
                                  quadrature, stratified_unit_square)
-from ..scene import bilinear_point
 from .hierarchy import Hierarchy
 from .memory import give_back_memory, growable, resized
 

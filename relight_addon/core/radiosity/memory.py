@@ -54,7 +54,7 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   above the runs' mean rather than above the largest: within 25 % of every run (the issue's
   target), below the largest by up to 8 %.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
-  every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
+  every used image: while the direct light of every texel and lamp is kept (TEXEL_CACHE_BYTES)
   ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
   (measured on 100k-face scans at medium with their photos upscaled, where the texels' light
   is the peak: 296 bytes a texel at 1 lamp (3.6 M texels), 410-430 at 2 (1.7 M), 647 at 4
@@ -92,6 +92,9 @@ RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.T
 STREAM_BYTES = 280 * 2**20
 STREAM_TEXEL_BYTES = 60
 STREAM_TEXEL_LAMP_BYTES = 18
+# the direct light of every texel and lamp (unoccluded and occluded, float64: 48 bytes) is kept
+# while it takes at most this much; a larger map is cast block by block when it is read
+TEXEL_CACHE_BYTES = 256 * 2**20
 # A mesh solved on a proxy (module docstring): its mesh phase (fixed, per input face), the
 # proxy's solve (fixed, per proxy triangle) per preset (the links per triangle grow with the
 # preset: high's and ultra's lines go through the origin), and the share of the solve held
@@ -213,8 +216,7 @@ def _texel_bytes(texels, lamps) -> int:
     """That for ``texels`` texels (None: no images) lit by ``lamps`` lamps."""
     if texels is None:
         return 0
-    from ..relight.texel import CACHE_BYTES
-    if 48 * texels * max(lamps, 1) > CACHE_BYTES:        # streamed (texel.TexelLight)
+    if 48 * texels * max(lamps, 1) > TEXEL_CACHE_BYTES:        # streamed (texel.TexelLight)
         return int(STREAM_BYTES + texels * (STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps))
     return int(RAY_CHUNK_BYTES + texels * (TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps))
 

@@ -19,10 +19,11 @@ from functools import partial
 import numpy as np
 
 from ..geometry.extent import bounding_diagonal
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
-from ..scene import SceneData, bilinear_point
+from ..scene import SceneData
 from .clusters import (build_cluster_tree, cluster_operator, cluster_transport,
                        cluster_visibility, link_clusters)
 from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage

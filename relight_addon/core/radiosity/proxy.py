@@ -14,7 +14,8 @@ the full mesh: core/relight/texel.py) carries the sharp shadows.  So the solve r
 2. the lamp patches (emissive meshes, area lights) are kept as they are;
 3. every input face is mapped to the proxy triangle closest to its centroid on the same side
    (``locate``), which gives each proxy triangle its reflectance (area-weighted mean) and group,
-   and every texel to a proxy triangle and its parameters, where the indirect light is read.
+   and every texel to a proxy triangle and its parameters, where the indirect light is read
+   (core/relight/proxy_texels.py).
 
 ``Proxy.deviation`` (distance from each input face's centroid to the proxy) is what the proxy
 costs geometrically; its cost in light is measured in benchmarks/bench_scan.py against the
@@ -28,13 +29,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.extent import bounding_diagonal
-from ..scene import SceneData, quad_area_normal
+from ..geometry.patch import quad_area_normal
+from ..scene import SceneData
 
 CANDIDATES = 12         # nearest sample points whose triangles are tested first
 SAMPLES_PER_FACE = 8    # proxy sample points per average proxy triangle
 CHUNK = 1 << 14         # points located at once (12-48 candidate triangles each)
-KERNEL_LEAVES = 16      # leaves around each texel that its indirect light is read from
-FACING = 0.5            # ... those whose normal is within 60 degrees of the texel's
 PLANAR = np.cos(np.radians(10.0))
 PLANE_ANGLE = np.cos(np.radians(5.0))
 PLANE_OFFSET = 10.0     # x the roughness: how far from a plane a proxy triangle may lie in it
@@ -333,7 +333,7 @@ def locate(proxy: SceneData, points, normals, allowed=None):
     on the proxy's triangles that face the same way as its normal (any triangle when none
     near it does).  Exact: the triangles tested are those of every sample point within the
     best distance found + h (every triangle has a sample within h of each of its points)."""
-    find = _finder(proxy, allowed)
+    find = finder(proxy, allowed)
     n_pts = len(points)
     patch = np.empty(n_pts, np.int64)
     u, v, dist = np.empty(n_pts), np.empty(n_pts), np.empty(n_pts)
@@ -343,7 +343,7 @@ def locate(proxy: SceneData, points, normals, allowed=None):
     return patch, u, v, dist
 
 
-def _finder(proxy: SceneData, allowed=None):
+def finder(proxy: SceneData, allowed=None):
     """:func:`locate` for one chunk of points (at most CHUNK), the proxy's samples and their
     tree built once."""
     ids = np.flatnonzero(proxy.lamp < 0 if allowed is None else allowed)
@@ -383,29 +383,6 @@ def _finder(proxy: SceneData, allowed=None):
     return find
 
 
-def texels_on(proxy: Proxy, scene: SceneData, tm):
-    """The texel map ``tm`` of ``scene`` with every texel's patch and parameters on the proxy
-    instead (the same images, texel order and dtypes): where the solution's light is read.
-    Located CHUNK texels at a time: a photo's texels are tens of millions."""
-    import dataclasses  # noqa: PLC0415
-
-    from ..scene import bilinear_point  # noqa: PLC0415
-    from ..texture.mapping import TexelMap  # noqa: PLC0415
-    normal = scene.area_normal()[1]
-    find = _finder(proxy.scene)
-    images = []
-    for im in tm.images:
-        patch = np.empty(len(im), im.patch.dtype)
-        u, v = np.empty(len(im), im.u.dtype), np.empty(len(im), im.v.dtype)
-        for c0 in range(0, len(im), CHUNK):
-            sl = slice(c0, c0 + CHUNK)
-            face = im.patch[sl]
-            pts = bilinear_point(scene.corners[face], im.u[sl], im.v[sl])
-            patch[sl], u[sl], v[sl], _ = find(pts, normal[face])
-        images.append(dataclasses.replace(im, patch=patch, u=u, v=v))
-    return TexelMap(images)
-
-
 def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     """Per-face shading normals (p, 3): the area-weighted mean normal of the faces whose
     centroids lie within ``radius`` and whose normals are within acos(``crease``) of the face's
@@ -436,46 +413,3 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     # surface nearby (a shelf over a table, a frame on a wall) is no bump of the surface
     roughness = float(1.4826 * np.median(np.abs(height))) if len(height) else 0.0
     return smooth, roughness
-
-
-class SmoothRead:
-    """Values of a solution's leaves read at points of the full mesh by a Gaussian kernel over
-    the leaves near each point that face its way (each leaf's width its own size), instead of
-    interpolating over the proxy's triangles: QEM leaves long thin triangles on flat regions,
-    and an indirect field interpolated over them has their streaks, which the photo does not
-    (the shadow-edge fit read them as lamp-ratio evidence: 10 % off on family room 0)."""
-
-    def __init__(self, hierarchy, leaves, points, normals, neighbours=KERNEL_LEAVES):
-        centre = hierarchy.centroid[leaves]
-        leaf_normal = hierarchy.normal[leaves]
-        width2 = np.maximum(hierarchy.area[leaves], 1e-300)
-        tree = cKDTree(centre)
-        k = min(neighbours, len(leaves))
-        n = len(points)
-        # uint16 (at most 65,536 leaves) or int32 / float32: 96 or 128 bytes a texel instead of
-        # 256 (6.8 M texels of photos: 0.9 GB; the exitance fit's sample of 2 M: 0.2 GB)
-        self.index = np.empty((n, k), np.uint16 if len(leaves) <= 1 << 16 else np.int32)
-        self.weight = np.empty((n, k), np.float32)
-        for c0 in range(0, n, CHUNK):
-            p = points[c0:c0 + CHUNK]
-            d, idx = tree.query(p, k=k)
-            d, idx = d.reshape(len(p), k), idx.reshape(len(p), k)
-            facing = np.einsum("ikj,ij->ik", leaf_normal[idx], normals[c0:c0 + CHUNK]) > FACING
-            w = np.exp(-0.5 * d ** 2 / width2[idx]) * facing
-            # no facing leaf near: the nearest facing one (or the nearest at all)
-            lost = w.sum(axis=1) <= 1e-12
-            if lost.any():
-                pick = np.where(facing[lost].any(axis=1), np.argmax(facing[lost], axis=1), 0)
-                w[lost] = 0.0
-                w[np.flatnonzero(lost), pick] = 1.0
-            self.index[c0:c0 + len(p)] = idx
-            self.weight[c0:c0 + len(p)] = w / w.sum(axis=1, keepdims=True)
-
-    def __call__(self, leaf_values):
-        v = np.asarray(leaf_values, np.float64)
-        flat = v.reshape(len(v), -1)
-        out = np.empty((len(self.index), flat.shape[1]))
-        for c0 in range(0, len(out), CHUNK):      # the gathered (chunk, k, c) values only
-            rows = slice(c0, c0 + CHUNK)
-            out[rows] = np.einsum("tk,tkc->tc", self.weight[rows], flat[self.index[rows]])
-        return out.reshape((len(self.index),) + v.shape[1:])

@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import nnls
 
+from ..geometry.patch import bilinear_point
 from ..radiosity.presets import get_preset
-from ..scene import bilinear_point
 from ..texture.colour import LUMINANCE, luminance
 from ..texture.mapping import adjacent_texel_pairs, count_adjacent_texel_pairs
 from .albedo import RHO_ESTIMATE_MAX, albedo_rounds

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
 from ..radiosity.links import INVISIBLE, PARTIAL, VISIBLE
 from ..radiosity.presets import get_preset
-from ..scene import bilinear_point
 from ..texture.colour import lab_distance, linear_rgb_to_lab, luminance
 from ..texture.mapping import element_means, neighbour_element_pairs, texel_elements
 from .direct import lamp_irradiance

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import make_occluder
 from ..lights import AREA, SUN
-from ..scene import bilinear_point
 from ..texture.colour import LUMINANCE
-from ..texture.mapping import CoveredTexels, TexelMap, dilate_seams
+from ..texture.mapping import dilate_seams, texel_subset
 from .maps import SEAM_PIXELS
 from .texel import TexelLight
 
@@ -92,17 +92,6 @@ def may_be_shadowed_at(scene, x, foot, triangles, margin=1.25):
         half_lamp = np.arcsin(np.clip((r + foot) / np.maximum(d_l, 1e-300), 0.0, 1.0))
         out |= (d_c - R < d_l) & (_angle(to_c, to_l) <= half_obj + half_lamp)
     return out
-
-
-def texel_subset(texel_map, mask):
-    """The texels of ``texel_map`` where ``mask`` (T,) holds, in the same order."""
-    images, start = [], 0
-    for im in texel_map.images:
-        m = mask[start:start + len(im)]
-        start += len(im)
-        images.append(CoveredTexels(im.shape, im.texel_index[m], im.patch[m], im.u[m], im.v[m],
-                                    im.coverage))
-    return TexelMap(images)
 
 
 def object_visibility(scene, texel_map, triangles, rays=RAYS, samples=SAMPLES,

@@ -35,7 +35,7 @@ import numpy as np
 from ..radiosity.memory import give_back_memory
 from ..radiosity.precompute import Cancelled, regather, solve_basis, solve_radiosity
 from ..radiosity.presets import PROXY_FACTOR, get_preset
-from ..radiosity.proxy import build_proxy, texels_on
+from ..radiosity.proxy import build_proxy
 from ..scene import SceneData
 from ..texture.colour import luminance
 from ..texture.mapping import patch_means, rasterize_patches, texel_elements, vertex_interpolate
@@ -44,9 +44,10 @@ from .exitance import fit_lamps, photo_misfit
 from .orient import orient
 from .maps import (clipped_ratio, map_images, maps_from,
                    ratio_maps, texels_of, texture_images)
+from .proxy_texels import texels_on
 from .reference import reference_correction
 from .refine import refine_by_texture
-from .texel import TexelLight
+from .texel import BUMPS, TexelLight, texel_light_for
 from .texel_maps import texel_maps
 from .transport import Transport, as_given
 
@@ -114,7 +115,7 @@ class ShadowFreeResult:
         offset, how the solution is read: a proxy's kernel), for ``scene``: the run's scene,
         or one with other lamps or objects (virtual ones, with their ``occluder``)."""
         proxy = self.solution.context.get("proxy") if self.solution is not None else None
-        return _texel_light(self.scene if scene is None else scene, self.texel_map,
+        return texel_light_for(self.scene if scene is None else scene, self.texel_map,
                             self.occluder if occluder is None else occluder, self.options,
                             seed, proxy, self.solution_texels)
 
@@ -206,7 +207,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         rad_scene, rad_tm = proxy.scene, texels_on(proxy, scene, tm)
         rad_occluder = proxy.scene.make_occluder() if occluder is not None else None
         rad_image = np.where(np.bincount(rad_tm.patch, minlength=proxy.n_patches) > 0, 0, -1)
-    texel_light = _texel_light(scene, tm, occluder, opt, opt.seed, proxy, rad_tm)
+    texel_light = texel_light_for(scene, tm, occluder, opt, opt.seed, proxy, rad_tm)
 
     # 1. Initialisation: eq 4.1 per patch, first solution, exitances, per-leaf albedo.
     stage(0.02, "Estimating reflectances (eq 4.1)")
@@ -336,21 +337,6 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     return result(texture_images(tm, t_final, scene.images), mp, cov, sol, first,
                   dict(shadowed_leaves=n_shadowed, frontier_leaves=n_frontier, referenced=n_ref,
                        default_reference=n_default), reference_info)
-
-
-# A scan's direct light is cast from this many RMS bump heights above its faces: its noise
-# would shadow grazing rays that the photographed, smooth surface lets through.
-BUMPS = 3.0
-
-
-def _texel_light(scene, tm, occluder, opt, seed, proxy, solution_texels):
-    """Per-texel light on ``tm`` of ``scene``; on a proxy's scan: its shading normals, rays
-    lifted over its bumps, the solution read by the proxy's kernel."""
-    return TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, seed,
-                      solution_texels=solution_texels,
-                      face_normals=None if proxy is None else proxy.normals,
-                      smooth_read=proxy is not None,
-                      offset=0.0 if proxy is None else BUMPS * proxy.roughness)
 
 
 def _proxy_lamp_view(proxy, occluder):

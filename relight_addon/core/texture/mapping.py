@@ -168,6 +168,17 @@ class TexelMap:
         return out
 
 
+def texel_subset(texel_map, mask):
+    """The texels of ``texel_map`` where ``mask`` (T,) holds, in the same order."""
+    images, start = [], 0
+    for im in texel_map.images:
+        m = mask[start:start + len(im)]
+        start += len(im)
+        images.append(CoveredTexels(im.shape, im.texel_index[m], im.patch[m], im.u[m], im.v[m],
+                                    im.coverage))
+    return TexelMap(images)
+
+
 # ------------------------------------------------------------------------------------------
 # Inverse maps
 # ------------------------------------------------------------------------------------------
