@@ -7,8 +7,9 @@ moves and the function splits must not change a result).
 
 What is recorded (every run is seeded, so two runs of the same code give the same bits):
 
-* the Cornell box (``scenes.testscenes.cornell_box``) solved at draft and medium: the leaf
-  radiosities, the per-patch radiosities and the per-lamp basis;
+* the Cornell box (``scenes.testscenes.cornell_box``) solved at draft and medium, and at draft
+  with high's spread ray origins and partial-link rays: the leaf radiosities, the per-patch
+  radiosities and the per-lamp basis;
 * a texel-mode shadow-free precompute at draft of the bpy-free office (``scenes.office``,
   16 texels per surface, the true albedo as the photo): per image the texture T and the maps M,
   the coverage, the per-texel denominator and the relit result;
@@ -38,13 +39,17 @@ def _setup_path():
         sys.path.insert(0, ROOT)
 
 
-def cornell(out: dict, preset: str):
+def cornell(out: dict, preset: str, **changes):
+    """``changes``: Quality fields on top of the preset (high's spread ray origins and
+    partial-link rays, at draft's cost)."""
     from relight_addon.core.radiosity.precompute import solve_radiosity
+    from relight_addon.core.radiosity.presets import get_preset
     from scenes.testscenes import cornell_box
-    sol = solve_radiosity(cornell_box(), preset, seed=0)
-    out[f"cornell_{preset}/leaf_B"] = np.asarray(sol.radiosity())
-    out[f"cornell_{preset}/patch_B"] = np.asarray(sol.patch_radiosity())
-    out[f"cornell_{preset}/basis"] = np.asarray(sol.basis)
+    sol = solve_radiosity(cornell_box(), get_preset(preset).with_(**changes), seed=0)
+    key = f"cornell_{preset}" + "".join(f"_{k}" for k in sorted(changes))
+    out[f"{key}/leaf_B"] = np.asarray(sol.radiosity())
+    out[f"{key}/patch_B"] = np.asarray(sol.patch_radiosity())
+    out[f"{key}/basis"] = np.asarray(sol.basis)
 
 
 def _office_scene(virtual_box: bool = False, split: int = 1):
@@ -136,6 +141,8 @@ def record(path: str):
     out = {}
     for name, job in (("cornell draft", lambda: cornell(out, "draft")),
                       ("cornell medium", lambda: cornell(out, "medium")),
+                      ("cornell draft + jitter, partial rays",
+                       lambda: cornell(out, "draft", jitter_origins=True, partial_rays=32)),
                       ("office (texel + lamp + box, element, none, proxy)", lambda: office(out))):
         t0 = time.perf_counter()
         job()
@@ -168,7 +175,7 @@ def compare(before: str, after: str, md: str | None = None, label: str = ""):
             rel = d / scale if scale > 0 else 0.0
         worst = max(worst, rel)
         rows.append((key, "equal" if same else "differs", f"{d:.3g}", f"{rel:.3g}"))
-    lines = [f"| array | bits | max abs diff | max diff / max abs |", "|---|---|---:|---:|"]
+    lines = ["| array | bits | max abs diff | max diff / max abs |", "|---|---|---:|---:|"]
     lines += [f"| {k} | {s} | {d} | {r} |" for k, s, d, r in rows]
     summary = (f"{label}: {len(rows)} arrays, " +
                ("all bit-for-bit equal" if equal_all else

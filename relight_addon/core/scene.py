@@ -19,6 +19,7 @@ from .geometry.extent import longest_side
 # here too (the bridge, tests)
 from .geometry.patch import bilinear_point, quad_area_normal  # noqa: F401
 from .lights import Lights
+from .numerics import safe_div
 
 # Relative tolerance (to the patch size) above which a quad counts as non-planar and is split.
 PLANARITY_TOLERANCE = 1e-4
@@ -50,8 +51,8 @@ def _non_planarity(corners: np.ndarray) -> np.ndarray:
     n = np.cross(b - a, c - a)
     nn = np.linalg.norm(n, axis=-1)
     size = np.maximum(np.linalg.norm(c - a, axis=-1), np.linalg.norm(d - b, axis=-1))
-    dist = np.abs(np.einsum("ij,ij->i", d - a, n)) / np.maximum(nn, 1e-300)
-    return dist / np.maximum(size, 1e-300)
+    dist = safe_div(np.abs(np.einsum("ij,ij->i", d - a, n)), nn)
+    return safe_div(dist, size)
 
 
 @dataclass

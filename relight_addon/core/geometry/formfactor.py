@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import safe_div
 from .patch import quad_area_normal
 from .sampling import quadrature
 
@@ -190,7 +191,7 @@ def patch_to_patch(recv_corners, src_corners, m: int = 8):
     ff = point_to_polygon(pts.reshape(-1, 3), np.repeat(rn, k, axis=0),
                           np.repeat(src_corners, k, axis=0), np.repeat(sn, k, axis=0))
     ff = ff.reshape(n, k)
-    return (ff * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
+    return safe_div((ff * w).sum(axis=1), w.sum(axis=1))
 
 
 def point_kernel(n_r, n_s, d):
@@ -198,4 +199,4 @@ def point_kernel(n_r, n_s, d):
     dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
     cr = d[:, 0] * n_r[:, 0] + d[:, 1] * n_r[:, 1] + d[:, 2] * n_r[:, 2]
     cs = -(d[:, 0] * n_s[:, 0] + d[:, 1] * n_s[:, 1] + d[:, 2] * n_s[:, 2])
-    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
+    return np.where((cr > 0) & (cs > 0), safe_div(cr * cs, dd * dd), 0.0)

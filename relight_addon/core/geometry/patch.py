@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import nonzero
+
 
 def bilinear_point(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Points of bilinear patches.  corners (..., 4, 3), u and v broadcast to (...,)."""
@@ -23,7 +25,7 @@ def quad_area_normal(corners: np.ndarray):
     """
     cross = np.cross(corners[..., 2, :] - corners[..., 0, :], corners[..., 3, :] - corners[..., 1, :])
     twice = np.linalg.norm(cross, axis=-1)
-    normal = cross / np.maximum(twice, 1e-300)[..., None]
+    normal = cross / nonzero(twice)[..., None]
     return 0.5 * twice, normal
 
 

@@ -49,7 +49,7 @@ class Quality:
     # point, is as likely dark as lit (3.2 % at rho 0.9).  High: family room 20's former
     # shadows went 0.83 -> 1.15 CIEDE2000 with 2 levels (before the texels read in the open)
     contact_levels: int = 0
-    # the unoccluded form factors of a leaf near its sources (links.final_form_factors) are
+    # the unoccluded form factors of a leaf near its sources (final_links.final_form_factors) are
     # averaged over this many m x m Gauss points when more than ``quadrature`` (its visibility,
     # exposure and hemisphere still those of its quadrature points).  Draft: 3.  At its one
     # point a face of a closed cube (one wall emitting, rho 0.99) that the oracle left whole took
@@ -64,13 +64,13 @@ class Quality:
     # 0-4.  Cost: the Cornell box at medium 1.77 -> 2.09 s, RenderPark's office 110 -> 136 s
     # (refining only the pairs whose 2 x 2 values spread took 117 s, but a leaf's row then mixes
     # two quadratures and is no longer exactly 1 in a closed room: 9e-5 off).  Not where a
-    # touching object's side crosses the leaf (links._finer_form_factors); twice as many a side
-    # where the source hovers just over the leaf's plane (links._hovering: a tube's reflector),
-    # up to 16 a side where a small source stands on the leaf's edge (links._edge_contact_points:
+    # touching object's side crosses the leaf (final_links._finer_form_factors); twice as many a side
+    # where the source hovers just over the leaf's plane (final_links._hovering: a tube's reflector),
+    # up to 16 a side where a small source stands on the leaf's edge (final_links._edge_contact_points:
     # the reflector's end caps; the Cornell box and the clutter furnace have no such pair)
     ff_quadrature: int = 0
     # the visibility rays of a near leaf's points leave from spots spread over the points'
-    # Gauss cells, one visible fraction per (leaf, source) pair (links.final_form_factors
+    # Gauss cells, one visible fraction per (leaf, source) pair (final_links.final_form_factors
     # ``jitter``), except on leaves a contact line crosses.  From 2 x 2 fixed points a thin
     # occluder close to the leaf is missed: RenderPark's classroom's reflectors read their
     # partner, half hidden by the tube between them, 19 % bright at medium.  High: the

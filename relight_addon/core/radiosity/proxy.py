@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.extent import bounding_diagonal
 from ..geometry.patch import quad_area_normal
+from ..numerics import nonzero, safe_div
 from ..scene import SceneData
 
 CANDIDATES = 12         # nearest sample points whose triangles are tested first
@@ -166,8 +167,8 @@ def build_proxy(scene: SceneData, faces: int, back_of=None) -> Proxy:
     p = proxy.n_patches
     w = np.bincount(of_patch, area, p)
     rho = np.stack([np.bincount(of_patch, area * scene.rho[:, c], p) for c in range(3)], 1)
-    fallback = (area @ scene.rho[:, :]) / max(area.sum(), 1e-300)
-    rho = np.where(w[:, None] > 0, rho / np.maximum(w, 1e-300)[:, None], fallback)
+    fallback = safe_div(area @ scene.rho[:, :], area.sum())
+    rho = np.where(w[:, None] > 0, rho / nonzero(w)[:, None], fallback)
     rho[~on_surface] = proxy.rho[~on_surface]
     groups, g_inv = np.unique(scene.group, return_inverse=True)
     share = np.zeros((p, len(groups)))
@@ -202,7 +203,7 @@ def plane_normals(sums, centres, tolerance):
     (the clean room 0.45) and relit with a lamp off at 1.10 CIEDE2000 (0.58 with the planes'
     normals).  A triangle that no plane takes keeps its own mean."""
     weight = np.linalg.norm(sums, axis=1)
-    unit = sums / np.maximum(weight, 1e-300)[:, None]
+    unit = sums / nonzero(weight)[:, None]
     label = np.where(weight > 0, -1, -2)
     for i in np.argsort(-weight, kind="stable"):
         if label[i] != -1:
@@ -215,7 +216,7 @@ def plane_normals(sums, centres, tolerance):
     inside = np.flatnonzero(label >= 0)
     total = np.zeros_like(sums)
     np.add.at(total, label[inside], sums[inside])
-    total /= np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
+    total /= nonzero(np.linalg.norm(total, axis=1))[:, None]
     out[inside] = total[label[inside]]
     return out
 
@@ -378,7 +379,7 @@ def finder(proxy: SceneData, allowed=None):
             k = min(4 * k, len(spts))
         lb, lc = best_b[:, 1], best_b[:, 2]
         v = np.clip(lc, 0.0, 1.0)
-        u = np.clip(np.where(v < 1.0 - 1e-12, lb / np.maximum(1.0 - v, 1e-300), 0.5), 0.0, 1.0)
+        u = np.clip(np.where(v < 1.0 - 1e-12, safe_div(lb, 1.0 - v), 0.5), 0.0, 1.0)
         return best_t, u, v, best_d
     return find
 
@@ -398,7 +399,7 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     acc = area[:, None] * normal
     np.add.at(acc, i, area[j, None] * normal[j])
     np.add.at(acc, j, area[i, None] * normal[i])
-    smooth = acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
+    smooth = acc / nonzero(np.linalg.norm(acc, axis=1))[:, None]
     # Roughness: the height of the centroids over the plane of their neighbourhood (its mean
     # point, the smoothed normal).
     mean = area[:, None] * centroid
@@ -407,7 +408,7 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     np.add.at(mean, j, area[i, None] * centroid[i])
     np.add.at(wsum, i, area[j])
     np.add.at(wsum, j, area[i])
-    mean /= np.maximum(wsum, 1e-300)[:, None]
+    mean /= nonzero(wsum)[:, None]
     height = np.einsum("ij,ij->i", centroid - mean, smooth)
     # robust (1.4826 x the median absolute height): a neighbourhood that takes in a parallel
     # surface nearby (a shelf over a table, a frame on a wall) is no bump of the surface

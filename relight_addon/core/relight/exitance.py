@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..geometry.patch import bilinear_point
+from ..numerics import safe_div
 from ..radiosity.presets import get_preset
 from ..texture.colour import LUMINANCE, luminance
 from ..texture.mapping import adjacent_texel_pairs, count_adjacent_texel_pairs
@@ -52,7 +53,7 @@ def fit_lamp_exitance(unit_basis, observed, area, channels_weight=LUMINANCE) -> 
     b = (observed @ channels_weight) * w
     E, rnorm = nnls(A, b)
     rank_deficient = np.linalg.matrix_rank(A) < A.shape[1]
-    return ExitanceFit(E, float(rnorm / max(np.linalg.norm(b), 1e-300)), bool(rank_deficient))
+    return ExitanceFit(E, float(safe_div(rnorm, np.linalg.norm(b))), bool(rank_deficient))
 
 
 @dataclass
@@ -253,8 +254,8 @@ def _equal_factors(scene, est, use_patch):
     for j in range(k):
         sel = scene.lamp == j
         if sel.any():
-            e_j = float((area[sel] * lum_emission[sel]).sum() / max(area[sel].sum(), 1e-300))
-            eq_k[j] = e_eq / max(e_j, 1e-300)
+            e_j = float(safe_div((area[sel] * lum_emission[sel]).sum(), area[sel].sum()))
+            eq_k[j] = safe_div(e_eq, e_j)
     return eq_k
 
 
@@ -302,7 +303,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
         light, (a, b) = texel_light.subset(rows), inv.reshape(-1, 2).T
         D, I = light.occluded_luminance(sol, scale)
         D, I = D[on], I[on]
-    share = D.sum(axis=1) / max(float(D.sum()), 1e-300)
+    share = safe_div(D.sum(axis=1), float(D.sum()))
     Da, Db, Ia, Ib = D[:, a], D[:, b], I[:, a], I[:, b]
     tiny = 1e-9 * max(float((D + I).sum(axis=0).max()), 1e-300)
 
@@ -543,7 +544,7 @@ def _weighted_median(values, weights):
     weight."""
     w = np.atleast_2d(np.asarray(weights, float))
     cum = np.cumsum(w, axis=1)
-    at = (cum - 0.5 * w) / np.maximum(cum[:, -1:], 1e-300)
+    at = safe_div(cum - 0.5 * w, cum[:, -1:])
     out = np.array([np.interp(0.5, a[wr > 0], values[wr > 0]) if np.any(wr > 0) else values[0]
                     for a, wr in zip(at, w)])
     return out if np.ndim(weights) == 2 else float(out[0])
@@ -572,4 +573,4 @@ def photo_misfit(sol, tm, photo, use_patch):
         return float("nan")
     a = sol.system.leaf_area[use]
     b, o = luminance(sol.radiosity()[use]), luminance(obs[use])
-    return float(np.sqrt(a @ (b - o) ** 2) / max(np.sqrt(a @ o ** 2), 1e-300))
+    return float(safe_div(np.sqrt(a @ (b - o) ** 2), np.sqrt(a @ o ** 2)))

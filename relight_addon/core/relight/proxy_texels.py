@@ -9,6 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.patch import bilinear_point
+from ..numerics import nonzero
 from ..radiosity.proxy import CHUNK, Proxy, finder
 from ..scene import SceneData
 from ..texture.mapping import TexelMap
@@ -46,7 +47,7 @@ class SmoothRead:
     def __init__(self, hierarchy, leaves, points, normals, neighbours=KERNEL_LEAVES):
         centre = hierarchy.centroid[leaves]
         leaf_normal = hierarchy.normal[leaves]
-        width2 = np.maximum(hierarchy.area[leaves], 1e-300)
+        width2 = nonzero(hierarchy.area[leaves])
         tree = cKDTree(centre)
         k = min(neighbours, len(leaves))
         n = len(points)
