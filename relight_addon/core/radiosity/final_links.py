@@ -26,34 +26,21 @@ from .links import (INVISIBLE, PARTIAL, VISIBLE, LeafGather, close_pairs, no_tim
 from .memory import give_back_memory, growable, resized
 
 # A near leaf's pair takes its form factor at the leaf's centre when the leaf's radius is below
-# this fraction of its gap to the source (the centre's error is of order (radius / gap)^2).
-# RenderPark's office at medium vs Mitsuba: 0.05 leaves every patch within 0.01 % of all points
-# (final form factors 12 % faster); 0.15, the far leaves' rule, put the worst 5.1 -> 5.5 %.
+# this fraction of its gap to the source (the centre's error is of order (radius / gap)^2)
 _CENTRE_RATIO = 0.05
 # a source with a corner this close to a leaf's plane (x the leaf's size) touches it
 _TOUCHING = 1e-3
-# A source that hovers over a leaf's plane (its nearest corner within _HOVER_HEIGHT x the
-# leaf's radius, not touching) while the leaf's radius exceeds _HOVER_GAP x its gap to it (a
-# reflector strip 3 cm from a fluorescent tube) varies on a scale the 3 x 3 points do not
-# resolve: that pair's form factors are taken on _HOVER_FACTOR x as many points a side.
-# RenderPark's classroom at medium vs Mitsuba 3: the fixtures' reflectors +9.5-11.4 % ->
-# +0.3-1.9 %, the 12 largest patches 1.18 / 2.52 -> 0.97 / 2.85 % (their light +1.5 % before),
-# for no measurable time there and 132 -> 141 s on the office (1.63 / 5.95 -> 1.61 / 5.96 %).
-# Per pair, not per leaf: all of a leaf's near pairs on 6 x 6 points cost the office 30 %.
-# Such a leaf's row mixes two quadratures, so its unoccluded sum is not exactly 1 by
-# construction; where its view is closed conserve.py sets the row to 1 all the same.
+# A source hovering over a leaf's plane (nearest corner within _HOVER_HEIGHT x the leaf's
+# radius, not touching) while the leaf's radius exceeds _HOVER_GAP x its gap varies on a
+# scale the m x m points miss: that pair takes _HOVER_FACTOR x as many points a side (per
+# pair: per leaf costs too much; conserve.py closes the row that mixes two quadratures)
 _HOVER_HEIGHT = 0.1
 _HOVER_GAP = 2.0
 _HOVER_FACTOR = 2
-# A small source standing on the leaf's plane at its edge, rising from it (a fixture's end cap
-# on its reflector, a baseboard beside a floor leaf), sends its light into a band along that
-# edge about as wide as the source is tall: 3 x 3 points a side miss it (the classroom's
-# reflectors took 54 % too little from their end caps at medium, 20-24 % at high, the top
-# strips 60 %; one floor leaf from a 0.1-high strip along its edge 16 %).  Such a pair takes
+# A small source standing on the leaf's plane at its edge, rising from it (an end cap, a
+# baseboard), lights a band along that edge about as wide as it is tall: that pair takes
 # ceil(_CONTACT_POINTS x the leaf's diameter / the source centre's height) points a side, at
-# most _CONTACT_MAX (16: within 0.2 % on those pairs).  A source rises when the cosine between
-# its normal and the leaf's is below _CONTACT_RISE (20 degrees or more: a proxy's nearly
-# coplanar neighbours do not).
+# most _CONTACT_MAX; it rises when the cosine between the normals is below _CONTACT_RISE
 _CONTACT_POINTS = 0.7
 _CONTACT_MAX = 16
 _CONTACT_RISE = 0.94

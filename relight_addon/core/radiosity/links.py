@@ -23,16 +23,13 @@ from .hierarchy import Hierarchy
 
 VISIBLE, PARTIAL, INVISIBLE = 0, 1, 2
 
-# Oracle sample points on the receiver (parameter space): centre and near the corners, where F
-# peaks.  Not on them: a corner point lies in the plane of a face that meets the receiver there,
-# whose form factor from it is then 0 instead of its share (in a closed cube the oracle saw rows
-# summing to about 0.4, estimated B at rho 0.99 60x too low, and refined the walls to the
-# minimum element: 1.5 M links at medium for a uniform furnace, 30 now).
+# Oracle sample points on the receiver (parameter space): centre and near, not on, the
+# corners, where F peaks (from a corner, a face meeting the receiver there has F = 0)
 _ORACLE_UV = np.array([[0.5, 0.5], [0.05, 0.05], [0.95, 0.05], [0.95, 0.95], [0.05, 0.95]])
 # Points closer than this fraction of the scene size to a plane count as on it.
 _PLANE_TOL = 1e-9
 # A (leaf, source) pair uses one quadrature point when the leaf's radius is below this fraction
-# of its gap to the source (A_r F_rs = A_s F_sr then holds to about 1 % at the 95th percentile).
+# of its gap to the source: F hardly varies over the leaf there
 _FAR_RATIO = 0.15
 # Chunk sizes for the vectorised oracle (links).
 _CHUNK_LINKS = 100_000
@@ -81,8 +78,7 @@ def visibility_types(free, partial) -> np.ndarray:
     return np.where(partial, PARTIAL, np.where(free == 0, INVISIBLE, VISIBLE)).astype(np.int8)
 
 
-# pairs tested at a time: ~300 B of temporaries each (RenderPark's office: 2.6 GB at draft for
-# its 2.5 M first links, when they were tested at once)
+# pairs tested at a time (~300 B of temporaries each)
 FACING_BLOCK = 1 << 18
 
 
