@@ -10,6 +10,8 @@ import sys
 
 import pytest
 
+pytest.importorskip("importlinter")     # requirements/test.txt (not in Blender's own Python)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TOOL = os.path.join(ROOT, "tools", "lint_imports.py")
 CONTRACTS = ("core-is-bpy-free", "core-layers", "radiosity-below-relight",
