@@ -42,9 +42,8 @@ from .solver import LeafSystem, SolveInfo
 
 MAX_REFINE_ROUNDS = 40
 # Lamp patches link to every patch as elements, outside the clusters, while there are at
-# most this many (area lights and small emissive meshes; a lamp of many faces, e.g. the
-# subdivided Cornell lamp of benchmarks/bench_scaling.py, is clustered like any surface: its
-# lamp x patch links cost more than they give there, 0.40 s -> 1.6 s at 144 x 2448).
+# most this many (a lamp of many faces is clustered like any surface: its lamp x patch links
+# cost more than they give)
 LAMP_PATCHES_MAX = 64
 # Shadow boundaries stop one level above the minimum element size (their links multiply fast).
 SHADOW_AREA_FACTOR = 4.0
@@ -232,12 +231,8 @@ class _LightEstimates:
 
 
 # The oracle's thresholds are relative to the reflected radiosity that this fraction of the
-# surface area reaches or exceeds (the brightest leaves' level, but not a hot spot's): in
-# RenderPark's office the inside of a desk lamp's shade, 0.03 m^2 by a bulb of exitance
-# 89,500, reflects 39,000 where the room's brightest 0.1 % reflects 590, and thresholds
-# relative to it left every wall, the floor and the ceiling unrefined at draft (their radiosity
-# 40-145 % off Mitsuba's).  In the Cornell box and the family's rooms this level is 0.95-1.0 of
-# the brightest leaf's.
+# surface area reaches or exceeds: the brightest leaves' level, but not a hot spot's (a lamp
+# shade's inside would leave the room unrefined)
 BRIGHT_AREA = 0.001
 
 
