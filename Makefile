@@ -2,6 +2,7 @@
 #
 #   make test        create .venv on first use (bpy wheel + runtime + test deps), run pytest
 #   make test-quick  the tests not marked slow (under 5 minutes)
+#   make layers      the import contracts of .importlinter (import-linter; make test checks them too)
 #   make demo        solve the embedded Cornell box (out/cornell.png), then relight the photographed
 #                    office through the operator (EEVEE frames, Cycles truth, out/demo_side_by_side.png,
 #                    out/demo.blend; copy in benchmarks/results/demo_office.png)
@@ -29,7 +30,7 @@ REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
 STAMP     := $(VENV)/.requirements-stamp
 STAMP_LTS := $(LTS)/.requirements-stamp
 
-.PHONY: test test-quick demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
+.PHONY: test test-quick layers demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
@@ -37,6 +38,9 @@ test: $(STAMP)
 # the tests not marked slow (conftest.py): under 5 minutes, between edits
 test-quick: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) -m "not slow" tests
+
+layers: $(STAMP)
+	$(VENV)/bin/python tools/lint_imports.py
 
 demo: $(STAMP)
 	$(VENV)/bin/python -m demo.cornell

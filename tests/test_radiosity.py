@@ -4,7 +4,7 @@ import pytest
 
 from relight_addon.core.geometry.formfactor import patch_to_patch
 from relight_addon.core.radiosity.hierarchy import Hierarchy
-from relight_addon.core.radiosity.links import final_form_factors
+from relight_addon.core.radiosity.final_links import final_form_factors
 from relight_addon.core.radiosity.precompute import Cancelled, solve_radiosity
 from relight_addon.core.radiosity.presets import PRESETS
 from relight_addon.core.scene import SceneData, SceneError, quads_from_boxes
@@ -158,7 +158,7 @@ def test_a_far_source_over_near_leaves_keeps_its_form_factor(levels):
     that source: they gather on their quadrature points) and to a 10 cm square 0.6 m above it
     (no occluder).
     Leaves small beside their gap to the square (5 levels) read it at their centre
-    (links.final_form_factors), larger ones (2 levels) on their points; either way the floor's
+    (final_links.final_form_factors), larger ones (2 levels) on their points; either way the floor's
     form factor to it is that of a 32 x 32 Gauss rule over the floor (read at the centres of
     2 levels' leaves: 1.7 % high)."""
     floor = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
@@ -181,7 +181,7 @@ def test_a_strip_beside_a_tube_reads_the_tube_on_finer_points():
     """RenderPark's classroom: a fixture's slanted reflector (1.4 m x 0.1 m, one leaf at
     medium) 2-6 cm from its fluorescent tube, which hovers over the strip's plane.  Its form
     factor on the medium preset's 3 x 3 points was 10 % high (the strip read +10 % against
-    Mitsuba 3); on finer points (links._hovering) it is that of a 64 x 64 Gauss rule."""
+    Mitsuba 3); on finer points (final_links._hovering) it is that of a 64 x 64 Gauss rule."""
     strip = [[-0.075, 0.698, -0.002], [-0.015, 0.698, 0.078], [-0.015, -0.698, 0.078],
              [-0.075, -0.698, -0.002]]
     tube = [[0.003, -0.65, 0.06], [0.003, 0.65, 0.06], [0.043, 0.65, 0.06], [0.043, -0.65, 0.06]]

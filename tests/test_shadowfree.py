@@ -352,7 +352,7 @@ def photo_resolution(monkeypatch):
     from relight_addon.core.relight import exitance, texel, texel_maps
     from relight_addon.core.texture import mapping
     monkeypatch.setattr(texel, "TEXEL_CHUNK", 256)
-    monkeypatch.setattr(texel, "CACHE_BYTES", 0)
+    monkeypatch.setattr(texel, "TEXEL_CACHE_BYTES", 0)
     monkeypatch.setattr(texel_maps, "BLOCK", 1024)
     monkeypatch.setattr(mapping, "MEANS_BLOCK", 1000)
     monkeypatch.setattr(exitance, "PAIRS_WHOLE", 0)

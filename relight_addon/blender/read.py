@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.geometry.patch import reverse_winding
 from ..core.lights import Lights
 from ..core.scene import RHO_MAX, ImageTexels, SceneData
 from ..core.texture.colour import srgb_to_linear
@@ -370,15 +371,6 @@ def _mesh_faces(me, report: ReadReport):
     report.quads += len(quad)
     report.ngons_split += len(ngon)
     return np.concatenate(parts).astype(np.int64), np.concatenate(polys).astype(np.int64)
-
-
-def reverse_winding(corners):
-    """The same patches facing the other way: (a, b, c, d) -> (a, d, c, b), triangles
-    (a, b, c, c) -> (a, c, b, b) (the repeated corner stays last).  Works on (p, 4, ...)."""
-    out = corners[:, [0, 3, 2, 1]]
-    tri = np.all(corners[:, 2] == corners[:, 3], axis=tuple(range(1, corners.ndim - 1)))
-    out[tri] = corners[tri][:, [0, 2, 1, 1]]
-    return out
 
 
 def _uv_layer(me, name):

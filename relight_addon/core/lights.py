@@ -38,7 +38,8 @@ import numpy as np
 
 from .geometry.formfactor import point_to_polygon
 from .geometry.sampling import R2
-from .scene import quad_area_normal
+from .geometry.patch import quad_area_normal
+from .numerics import nonzero, safe_div
 
 POINT, SPOT, SUN, AREA, POLYGON = 0, 1, 2, 3, 4
 KIND_NAMES = {POINT: "point", SPOT: "spot", SUN: "sun", AREA: "area", POLYGON: "polygon"}
@@ -109,7 +110,7 @@ class Lights:
         m = np.asarray(matrix, np.float64)
         cols = m[:3, :3].T                                   # rows: world images of X, Y, Z
         scale = np.linalg.norm(cols, axis=1)
-        axes = cols / np.maximum(scale, 1e-300)[:, None]
+        axes = cols / nonzero(scale)[:, None]
         return Lights(kind, lamp, m[:3, 3], axes, scale, np.asarray(intensity, float), radius,
                       soft_falloff, spot_size, spot_blend, angle, np.asarray(size, float), round,
                       spread, np.zeros((4, 3)))
@@ -126,7 +127,7 @@ class Lights:
         centre = c.mean(axis=1)
         u = c[:, 1] - c[:, 0]
         u -= np.einsum("ij,ij->i", u, normal)[:, None] * normal
-        u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+        u /= nonzero(np.linalg.norm(u, axis=1))[:, None]
         v = np.cross(-normal, u)
         axes = np.stack([u, v, -normal], axis=1)           # emits along local -Z = the normal
         radius = np.linalg.norm(c - centre[:, None], axis=2).max(axis=1)
@@ -183,8 +184,8 @@ def cone_irradiance(sin_beta, cos_theta):
         s, c, t = sb[part], ct[part], st[part]
         h2 = 1.0 / (s * s)
         root = np.sqrt(np.maximum(h2 - 1.0, 0.0))
-        a1 = np.arcsin(np.clip(root / np.sqrt(h2) / np.maximum(t, 1e-300), -1.0, 1.0))
-        a2 = np.arccos(np.clip(-root * c / np.maximum(t, 1e-300), -1.0, 1.0))
+        a1 = np.arcsin(np.clip(safe_div(root / np.sqrt(h2), t), -1.0, 1.0))
+        a2 = np.arccos(np.clip(safe_div(-root * c, t), -1.0, 1.0))
         a3 = np.sqrt(np.maximum(1.0 - h2 * c * c, 0.0))
         f = 0.5 - a1 / np.pi + (c * a2 - root * a3) / (np.pi * h2)
         out[part] = np.pi * np.maximum(f, 0.0)
@@ -195,7 +196,7 @@ def spot_mask(lights, i, rays):
     """Cycles' spot mask for rays (m, 3) travelling from spot ``i`` (need not be unit)."""
     ax, sc = lights.axes[i], lights.scale[i]
     loc = np.stack([rays @ ax[0] / sc[0], rays @ ax[1] / sc[1], -(rays @ ax[2]) / sc[2]], -1)
-    z = loc[..., 2] / np.maximum(np.linalg.norm(loc, axis=-1), 1e-300)
+    z = safe_div(loc[..., 2], np.linalg.norm(loc, axis=-1))
     ch = np.cos(0.5 * lights.spot_size[i])
     if lights.spot_blend[i] <= 0:
         return (z > ch).astype(np.float64)
@@ -230,14 +231,14 @@ def _closed_form(lights, i, p, n):
                                 np.broadcast_to(lights.emit_axis[i], p.shape))
     w = lights.position[i] - p
     d = np.linalg.norm(w, axis=1)
-    ct = np.einsum("ij,ij->i", w, n) / np.maximum(d, 1e-300)
+    ct = safe_div(np.einsum("ij,ij->i", w, n), d)
     r = lights.radius[i]
     if r <= 0:
-        return np.maximum(ct, 0.0) / np.maximum(d * d, 1e-300)
+        return safe_div(np.maximum(ct, 0.0), d * d)
     L = 1.0 / (np.pi * r * r)
     if lights.soft_falloff[i]:
         return L * cone_irradiance(r / np.sqrt(d * d + r * r), ct)
-    e = L * cone_irradiance(np.minimum(r / np.maximum(d, 1e-300), 1.0), ct)
+    e = L * cone_irradiance(np.minimum(safe_div(r, d), 1.0), ct)
     return np.where(d <= r, np.pi * L, e)
 
 
@@ -247,7 +248,7 @@ def _frame(w):
     """Two unit vectors perpendicular to each row of w (m, 3)."""
     a = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     t1 = np.cross(a, w)
-    t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
+    t1 /= nonzero(np.linalg.norm(t1, axis=1, keepdims=True))
     return t1, np.cross(w, t1)
 
 
@@ -275,9 +276,9 @@ def _samples(lights, i, p, j, shift, far):
         a, b, c, d = lights.corners[i]
         a1 = np.linalg.norm(np.cross(b - a, c - a))
         a2 = np.linalg.norm(np.cross(c - a, d - a))
-        split = a1 / max(a1 + a2, 1e-300)
+        split = safe_div(a1, a1 + a2)
         first = xu < split
-        x = np.where(first, xu / max(split, 1e-300), (xu - split) / max(1.0 - split, 1e-300))
+        x = np.where(first, safe_div(xu, split), safe_div(xu - split, 1.0 - split))
         r = np.sqrt(np.clip(x, 0.0, 1.0))
         p1, p2 = np.where(first[:, None], b, c), np.where(first[:, None], c, d)
         return a + (r * (1 - xv))[:, None] * (p1 - a) + (r * xv)[:, None] * (p2 - a)
@@ -295,7 +296,7 @@ def _samples(lights, i, p, j, shift, far):
     r = lights.radius[i]
     if r <= 0:
         return np.broadcast_to(lights.position[i], p.shape).copy()
-    t1, t2 = _frame(w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300))
+    t1, t2 = _frame(safe_div(w, np.linalg.norm(w, axis=1, keepdims=True)))
     rad, ph = r * np.sqrt(xu), 2 * np.pi * xv
     return lights.position[i] + (rad * np.cos(ph))[:, None] * t1 + \
         (rad * np.sin(ph))[:, None] * t2
@@ -309,13 +310,13 @@ def _sample_weight(lights, i, p, n, q):
     r^2, x the spread profile."""
     d = q - p
     dist = np.linalg.norm(d, axis=1)
-    cos_r = np.maximum(np.einsum("ij,ij->i", d, n) / np.maximum(dist, 1e-300), 0.0)
+    cos_r = np.maximum(safe_div(np.einsum("ij,ij->i", d, n), dist), 0.0)
     kind = lights.kind[i]
     if kind == SPOT:
         return cos_r * spot_mask(lights, i, -d), cos_r
     if kind in (AREA, POLYGON):
-        cos_l = np.maximum(-(d @ lights.emit_axis[i]) / np.maximum(dist, 1e-300), 0.0)
-        k = cos_r * cos_l / np.maximum(dist * dist, 1e-300)
+        cos_l = np.maximum(safe_div(-(d @ lights.emit_axis[i]), dist), 0.0)
+        k = safe_div(cos_r * cos_l, dist * dist)
         return k * spread_profile(np.arccos(np.clip(cos_l, -1.0, 1.0)), lights.spread[i]), k
     return cos_r, cos_r
 

@@ -15,6 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .geometry.extent import longest_side
+# the patch geometry (bilinear_point, quad_area_normal) lives below the scene; it is read from
+# here too (the bridge, tests)
+from .geometry.patch import bilinear_point, quad_area_normal  # noqa: F401
+from .lights import Lights
+from .numerics import safe_div
 
 # Relative tolerance (to the patch size) above which a quad counts as non-planar and is split.
 PLANARITY_TOLERANCE = 1e-4
@@ -40,34 +45,14 @@ class ImageTexels:
     colorspace: str = ""
 
 
-def bilinear_point(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Points of bilinear patches.  corners (..., 4, 3), u and v broadcast to (...,)."""
-    u = np.asarray(u)[..., None]
-    v = np.asarray(v)[..., None]
-    a, b, c, d = (corners[..., i, :] for i in range(4))
-    return (1 - u) * (1 - v) * a + u * (1 - v) * b + u * v * c + (1 - u) * v * d
-
-
-def quad_area_normal(corners: np.ndarray):
-    """Area and unit normal of planar bilinear patches (triangles repeat a corner).
-
-    Uses the diagonals: for a planar quad, area = |(c - a) x (d - b)| / 2, exact for triangles
-    ``(a, b, c, c)`` too.
-    """
-    cross = np.cross(corners[..., 2, :] - corners[..., 0, :], corners[..., 3, :] - corners[..., 1, :])
-    twice = np.linalg.norm(cross, axis=-1)
-    normal = cross / np.maximum(twice, 1e-300)[..., None]
-    return 0.5 * twice, normal
-
-
 def _non_planarity(corners: np.ndarray) -> np.ndarray:
     """Distance of corner d from the plane of (a, b, c), relative to the patch diameter."""
     a, b, c, d = (corners[:, i, :] for i in range(4))
     n = np.cross(b - a, c - a)
     nn = np.linalg.norm(n, axis=-1)
     size = np.maximum(np.linalg.norm(c - a, axis=-1), np.linalg.norm(d - b, axis=-1))
-    dist = np.abs(np.einsum("ij,ij->i", d - a, n)) / np.maximum(nn, 1e-300)
-    return dist / np.maximum(size, 1e-300)
+    dist = safe_div(np.abs(np.einsum("ij,ij->i", d - a, n)), nn)
+    return safe_div(dist, size)
 
 
 @dataclass
@@ -128,7 +113,6 @@ class SceneData:
             raise SceneError("Reflectance must lie in [0, 1): a value of 1 or more never converges")
         if np.any(self.emission < 0) or not np.all(np.isfinite(self.emission)):
             raise SceneError("Emission must be finite and non-negative")
-        from .lights import Lights
         if self.lights is None:
             self.lights = Lights.empty()
         top = max(int(self.lamp.max(initial=-1)), int(self.lights.lamp.max(initial=-1)))
@@ -240,7 +224,6 @@ class SceneData:
         light, but no patches, so no new elements or links (a virtual emissive mesh, which
         blocks nothing, can then be added to a solved room like any other light).  Each face
         emits on the side of its normal (a two-sided face is two patches)."""
-        from .lights import Lights
         move = np.flatnonzero(np.isin(self.lamp, list(lamps)))
         if len(move) == 0:
             return self

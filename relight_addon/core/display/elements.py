@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import safe_div
 from ..radiosity.links import VISIBLE
 from ..relight.refine import SIGNIFICANT_SHARE, visibility_class
 from ..relight.transport import Transport, as_given
@@ -43,7 +44,7 @@ def element_values(result, mode: str):
     if mode == "VISIBILITY":
         du, do = luminance(DU_k), luminance(Docc_k)                        # (k, L)
         att = np.where(du > 0, do / np.where(du > 0, du, 1.0), 1.0)
-        share = du / np.maximum(luminance(as_given(HU_k, sol.scene))[None], 1e-300)
+        share = safe_div(du, luminance(as_given(HU_k, sol.scene))[None])
         sig = share >= SIGNIFICANT_SHARE
         code = visibility_class(att)
         worst = np.where(sig, code, VISIBLE).max(axis=0, initial=VISIBLE)

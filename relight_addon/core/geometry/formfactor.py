@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import quad_area_normal
+from ..numerics import safe_div
+from .patch import quad_area_normal
+from .sampling import quadrature
 
 # Vertices closer than this (relative to the polygon size) to x are treated as touching x.
 _TINY = 1e-12
@@ -179,8 +181,6 @@ def patch_to_patch(recv_corners, src_corners, m: int = 8):
     recv_corners, src_corners (n, 4, 3).  Tensor Gauss rule with m x m Jacobian-weighted points on
     each receiver; exact point-to-polygon integration over each source.
     """
-    from .sampling import quadrature
-
     recv_corners = np.asarray(recv_corners, float)
     src_corners = np.asarray(src_corners, float)
     n = len(recv_corners)
@@ -191,7 +191,7 @@ def patch_to_patch(recv_corners, src_corners, m: int = 8):
     ff = point_to_polygon(pts.reshape(-1, 3), np.repeat(rn, k, axis=0),
                           np.repeat(src_corners, k, axis=0), np.repeat(sn, k, axis=0))
     ff = ff.reshape(n, k)
-    return (ff * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
+    return safe_div((ff * w).sum(axis=1), w.sum(axis=1))
 
 
 def point_kernel(n_r, n_s, d):
@@ -199,4 +199,4 @@ def point_kernel(n_r, n_s, d):
     dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
     cr = d[:, 0] * n_r[:, 0] + d[:, 1] * n_r[:, 1] + d[:, 2] * n_r[:, 2]
     cs = -(d[:, 0] * n_s[:, 0] + d[:, 1] * n_s[:, 1] + d[:, 2] * n_s[:, 2])
-    return np.where((cr > 0) & (cs > 0), cr * cs / np.maximum(dd * dd, 1e-300), 0.0)
+    return np.where((cr > 0) & (cs > 0), safe_div(cr * cs, dd * dd), 0.0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import bilinear_point, quad_area_normal
+from .patch import bilinear_point, quad_area_normal
 
 # Generalised golden ratios of the R2 low-discrepancy sequence (Roberts 2018).
 R2 = (0.7548776662466927, 0.5698402909980532)

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import area_uniform_uv, jacobian_coefficients
-from ..scene import bilinear_point
+from ..numerics import nonzero
 from .hierarchy import Hierarchy
 
 
@@ -245,7 +246,7 @@ class _Factors:
             leaf = self.by_rank[first[link] + (entry - indptr[link])]
             x, nl, c = self.leaf_centroid[leaf], self.leaf_normal[leaf], centre[link]
             dx, dy, dz = c[:, 0] - x[:, 0], c[:, 1] - x[:, 1], c[:, 2] - x[:, 2]
-            r2 = np.maximum(dx * dx + dy * dy + dz * dz, 1e-300)
+            r2 = nonzero(dx * dx + dy * dy + dz * dz)
             cos = np.maximum(0.0, dx * nl[:, 0] + dy * nl[:, 1] + dz * nl[:, 2]) / np.sqrt(r2)
             yield slice(a, a + len(entry)), link, leaf, cos / r2 * per_link[link] * per_leaf[leaf]
 

@@ -15,9 +15,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..scene import quad_area_normal
+from ..geometry.patch import quad_area_normal
+from ..numerics import nonzero
 from .hierarchy import Hierarchy
-from .links import _segment_ranges
+from .links import segment_ranges
 
 _PLANE_TOL = 1e-4       # x scene size: an edge this close to a plane lies in it
 _INSIDE_TOL = 1e-3      # x the element's diameter: a line along its border does not cross it
@@ -85,7 +86,7 @@ def _crossing(a, b, quads, normals, tol):
     edge = np.roll(quads, -1, axis=1) - quads
     real = np.linalg.norm(edge, axis=2) > 1e-12                                  # (n, 4)
     inward = np.cross(normals[:, None], edge)
-    inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
+    inward /= nonzero(np.linalg.norm(inward, axis=2, keepdims=True))
     d = b - a
     t0, t1 = np.zeros(len(a)), np.ones(len(a))
     for k in range(4):
@@ -147,7 +148,7 @@ def _leaf_segment_pairs(h, segments, seg_patch):
     leaves = h.leaves()
     start = first[h.patch[leaves]]
     cnt = first[h.patch[leaves] + 1] - start
-    return segments, np.repeat(leaves, cnt), _segment_ranges(start, cnt)
+    return segments, np.repeat(leaves, cnt), segment_ranges(start, cnt)
 
 
 def _crossed(h, segments, li, si):

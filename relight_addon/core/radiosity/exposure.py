@@ -34,6 +34,7 @@ import scipy.sparse as sp
 
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import cosine_directions, quadrature
+from ..numerics import safe_div
 from .conserve import back_copies
 
 BURIED_RAYS = 8         # per quadrature point
@@ -41,7 +42,7 @@ BURIED_RAYS = 8         # per quadrature point
 
 def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
     """Exposure (L,) in [0, 1] of each leaf (see the module docstring).  ``near`` (h.n,) bool:
-    the leaves that gather on their m x m quadrature points (links.final_form_factors), the
+    the leaves that gather on their m x m quadrature points (final_links.final_form_factors), the
     others gather at their centre, which decides for them (0 or 1; every leaf at draft, m = 1).
     ``occluder`` knows the patch of each of its triangles (``patch_of_triangle``)."""
     L = len(leaves)
@@ -64,7 +65,7 @@ def leaf_exposure(h, leaves, near, occluder, scene, m, rng, scale):
             pts, w = h.centroid[leaves[test]][:, None], np.ones((len(test), 1))
         buried = _buried(pts, h.normal[leaves[test]], occluder, patch_of, patch_normal, backed,
                          eps, rng)
-        a[test] = (w * ~buried).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)
+        a[test] = safe_div((w * ~buried).sum(axis=1), w.sum(axis=1))
     return a
 
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import SceneData, bilinear_point, quad_area_normal
+from ..geometry.patch import bilinear_point, quad_area_normal
+from ..scene import SceneData
 
 _ROOT_PARAM = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 # Corner (u, v) of the four children in the parent's parameter space (counter-clockwise).

@@ -4,8 +4,10 @@
 Used before a precompute starts so that a scene too large for the machine is refused with a
 clear message instead of swapping or being killed.  It estimates what the precompute adds to
 the process (its arrays, the solver's, the threads' temporaries) over BASE_BYTES for Python,
-numpy and scipy; the scene already read is not counted.  Measured as ``ru_maxrss`` after the
-precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.md, scan.md).
+numpy and scipy; the scene already read is not counted.  Every line below is fitted above
+measured peaks (``ru_maxrss`` after the precompute minus before it, plus BASE_BYTES): the
+measurements are in benchmarks/results/ (scaling.md, mgf.md, scan.md, texel_scaling.md, and
+constants_history.md for the fits).
 
 * leaves ``L``: every input patch is split in quadtree fashion while its elements stay larger
   than ``min_area * total area``.  Per patch that is at most ``4**floor(log4(a / (min_area*A)))``
@@ -13,58 +15,26 @@ precompute minus before it, plus BASE_BYTES (benchmarks/results/scaling.md, mgf.
   leaves each cover at least ``min_area`` of the total area).  This is an upper bound; the
   refinement oracles usually stop earlier.
 * the solve: ``SOLVE_BYTES[preset] = (fixed, per leaf, per patch, at most)``: fixed + per
-  leaf x L + per patch x patches, or ``at most`` x L where that is less (draft: below ~1,000
-  patches, where its memory grows from nothing rather than from the fixed part), and never less
-  than a coarser preset's.  The links and their
-  leaf-level entries per leaf depend on the scene (at medium a Cornell box of 10,625 patches
-  has 54 links a leaf, RenderPark's office 178, family room 0 as a 5,700-face scan 260) and
-  on the preset (entries per link grow with the quadrature and the source split), so each
-  preset has its own line, fitted 15 % above the upper envelope of 40 measured solves
-  (/proc's high-water mark, or ru_maxrss, after minus before, plus BASE_BYTES; the same
-  solve's peak varies by +-12 % from run to run): Cornell boxes of 17 to 10,625 patches at
-  every preset (ultra: 17 and 153), RenderPark's office (draft, medium), family room 0 clean
-  (35 quads), as a scan solved directly (3,600 faces at draft, 5,700 at medium and high) and
-  on a proxy (100k and 200k faces).  Over them the estimate is, where the measured peak is
-  above 250 MB: draft 1.15-1.6x, medium 1.15-2.0x, ultra 1.15x (Cornell box: 1.18x with
-  128 rays on partly blocked links); below it up to 270 MB too much.  High's line was
-  refitted (15 % above) once a partly blocked link's per-ray gather entries were summed per
-  source leaf, which took its peaks down by a third, on 9 solves: Cornell boxes of 17 to
-  5,508 patches, RenderPark's office and classroom, family room 0 as a 5,700-face scan
-  solved directly (3.6 M links): 1.15-2.0x (the scan and the classroom 1.15x, the office
-  1.30x, Cornell boxes of 1k-5k patches 1.45-2.0x: fewer links a patch); the line before
-  was 1.4-2.9x over them.  (Scans solved on a proxy have a model of their own, below.)
+  leaf x L + per patch x patches, or ``at most`` x L where that is less (draft: small scenes,
+  whose memory grows from nothing rather than from the fixed part), and never less than a
+  coarser preset's.  The links and their leaf-level entries per leaf depend on the scene and
+  on the preset, so each preset has its own line, fitted 15 % above the upper envelope of its
+  measured solves (a solve's peak varies by +-12 % from run to run).
 * A mesh solved on a proxy (radiosity.proxy: more than PROXY_FACTOR x the preset's proxy
   faces) goes through phases one after another, and its peak is the largest of them: the
   mesh's (turning faces, decimating, placing the texels: ``MESH_BYTES`` + ``FACE_BYTES`` per
   input face + ``PLACE_TEXEL_BYTES`` per texel of its photos), the proxy's solve
   (``PROXY_SOLVE_BYTES[preset]``: fixed + per proxy triangle), and the texel work over what
-  the solution holds meanwhile (``PROXY_HELD`` of the solve).  Measured
-  (benchmarks/results/scan.md; the phases' peaks over the read, sampled): family rooms 0, 3,
-  5, 16 (and the tests' room 20) as scans of 20k-200k faces: the mesh 235-300 MB (flat: it
-  works in chunks), the solve at draft (1,000 triangles) 344-430, medium (3,000) 459-607
-  (1,000: 416, 6,000: 722), high (3,000) 707-827 (6,000: 1,539), ultra (3,000) 4,511; the
-  texels 250-620 (106k texels).  With photos of 1.7 M, 6.6 M and 14.9 M texels (room 0's
-  100k-face scan at medium, its bakes upscaled) the peaks were 1,204, 1,362 and 1,794 MB
-  (+ BASE_BYTES), the texel work's (the exitance fit's sample, the maps), placing the texels
-  957 MB at 15 M, 300 of it the mesh phase's own (~48 bytes a texel): the texel work by the
-  shadow-free textures' model below gives 0.99x, 0.87x and 1.09x of them (a rerun: 1,218,
-  1,368, 1,805 MB; 1.33x at 1.7 M before the kept texels' lamp bytes were refitted; images of
-  up to PHOTO_TEXELS hold float64 texel parameters, as 6.6 M's do).  The same case varies by
-  +-14 % from run to run (room 20's scan at medium: 514 and 606 MB), so the lines sit ~10 %
-  above the runs' mean rather than above the largest: within 25 % of every run (the issue's
-  target), below the largest by up to 8 %.
+  the solution holds meanwhile (``PROXY_HELD`` of the solve).  The same case varies by
+  +-14 % from run to run, so these lines sit ~10 % above the runs' mean rather than above the
+  largest.
 * Shadow-free textures (core/relight/shadowfree.py) add, for scenes with images, per texel of
-  every used image: while the direct light of every texel and lamp is kept (texel.CACHE_BYTES)
+  every used image: while the direct light of every texel and lamp is kept (TEXEL_CACHE_BYTES)
   ``TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps`` and a ray-casting chunk of ``RAY_CHUNK_BYTES``
-  (measured on 100k-face scans at medium with their photos upscaled, where the texels' light
-  is the peak: 296 bytes a texel at 1 lamp (3.6 M texels), 410-430 at 2 (1.7 M), 647 at 4
-  (1.0 M), over the ray chunk and the solve held; fitted 10 % above: 200 + 130 a lamp.  The
-  office's 1.17 M texels at 2 lamps, draft, need less: 390 bytes a texel); past
-  it (photo resolution: the light cast and the maps written block by block, the exitance fit
-  on a sample) ``STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps`` over
-  ``STREAM_BYTES`` (the fit's sample and a block): the photos read, the texel map, the
-  textures and maps written (measured: 581 MB at 4.7 M texels, 1642 MB at 16.5 M over the
-  process's own 206 MB; benchmarks/results/texel_scaling.md).
+  (fitted 10 % above); past it (photo resolution: the light cast and the maps written block
+  by block, the exitance fit on a sample) ``STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES *
+  lamps`` over ``STREAM_BYTES`` (the fit's sample and a block): the photos read, the texel
+  map, the textures and maps written.
 """
 from __future__ import annotations
 
@@ -92,6 +62,9 @@ RAY_CHUNK_BYTES = 170 * 2**20    # two ray-casting threads of 8k texels (texel.T
 STREAM_BYTES = 280 * 2**20
 STREAM_TEXEL_BYTES = 60
 STREAM_TEXEL_LAMP_BYTES = 18
+# the direct light of every texel and lamp (unoccluded and occluded, float64: 48 bytes) is kept
+# while it takes at most this much; a larger map is cast block by block when it is read
+TEXEL_CACHE_BYTES = 256 * 2**20
 # A mesh solved on a proxy (module docstring): its mesh phase (fixed, per input face), the
 # proxy's solve (fixed, per proxy triangle) per preset (the links per triangle grow with the
 # preset: high's and ultra's lines go through the origin), and the share of the solve held
@@ -213,8 +186,7 @@ def _texel_bytes(texels, lamps) -> int:
     """That for ``texels`` texels (None: no images) lit by ``lamps`` lamps."""
     if texels is None:
         return 0
-    from ..relight.texel import CACHE_BYTES
-    if 48 * texels * max(lamps, 1) > CACHE_BYTES:        # streamed (texel.TexelLight)
+    if 48 * texels * max(lamps, 1) > TEXEL_CACHE_BYTES:        # streamed (texel.TexelLight)
         return int(STREAM_BYTES + texels * (STREAM_TEXEL_BYTES + STREAM_TEXEL_LAMP_BYTES * lamps))
     return int(RAY_CHUNK_BYTES + texels * (TEXEL_BYTES + TEXEL_LAMP_BYTES * lamps))
 
@@ -236,9 +208,7 @@ def _texels_and_lamps(scene_data):
 def give_back_memory():
     """Return the C allocator's free pages to the system (glibc's malloc_trim; nothing
     elsewhere).  A block's arrays of a few MB are freed into the heaps of the threads that made
-    them and would stay resident: on 16.5 M texels (bench_texel_scaling.py) 2.12 GB peak
-    without, 2.03 GB with (before float32 texel parameters); in the radiosity solve of
-    RenderPark's office at medium, 6.6 GB without, 5.0 GB with (the form factors' threads)."""
+    them and would stay resident."""
     trim = _malloc_trim()
     if trim is not None:
         trim(0)

@@ -19,10 +19,12 @@ from functools import partial
 import numpy as np
 
 from ..geometry.extent import bounding_diagonal
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
-from ..scene import SceneData, bilinear_point
+from ..numerics import nonzero
+from ..scene import SceneData
 from .clusters import (build_cluster_tree, cluster_operator, cluster_transport,
                        cluster_visibility, link_clusters)
 from .conserve import COVERAGE_RAYS, back_copies, conserve_rows, hemisphere_coverage
@@ -32,16 +34,16 @@ from .gather_rows import GatherRows
 from .source_split import split_sources
 from .hierarchy import Hierarchy
 from .memory import give_back_memory
-from .links import (PARTIAL, LinkSet, close_pairs, facing, final_form_factors, initial_pairs,
+from .final_links import final_form_factors
+from .links import (PARTIAL, LinkSet, close_pairs, facing, initial_pairs, no_timer,
                     oracle_estimates, visibility_types)
 from .presets import Quality, get_preset
 from .solver import LeafSystem, SolveInfo
 
 MAX_REFINE_ROUNDS = 40
 # Lamp patches link to every patch as elements, outside the clusters, while there are at
-# most this many (area lights and small emissive meshes; a lamp of many faces, e.g. the
-# subdivided Cornell lamp of benchmarks/bench_scaling.py, is clustered like any surface: its
-# lamp x patch links cost more than they give there, 0.40 s -> 1.6 s at 144 x 2448).
+# most this many (a lamp of many faces is clustered like any surface: its lamp x patch links
+# cost more than they give)
 LAMP_PATCHES_MAX = 64
 # Shadow boundaries stop one level above the minimum element size (their links multiply fast).
 SHADOW_AREA_FACTOR = 4.0
@@ -105,7 +107,7 @@ class RadiositySolution:
         a = self.system.leaf_area
         patch = self.system.patch
         out = np.stack([np.bincount(patch, a * B[:, c], p) for c in range(3)], axis=1)
-        return out / np.maximum(np.bincount(patch, a, p), 1e-300)[:, None]
+        return out / nonzero(np.bincount(patch, a, p))[:, None]
 
     # Timings: "form_factors" and "visibility" are the point-to-polygon and ray-casting time
     # wherever they happen (oracle and final links); "refine" and "final_links" include them.
@@ -229,12 +231,8 @@ class _LightEstimates:
 
 
 # The oracle's thresholds are relative to the reflected radiosity that this fraction of the
-# surface area reaches or exceeds (the brightest leaves' level, but not a hot spot's): in
-# RenderPark's office the inside of a desk lamp's shade, 0.03 m^2 by a bulb of exitance
-# 89,500, reflects 39,000 where the room's brightest 0.1 % reflects 590, and thresholds
-# relative to it left every wall, the floor and the ceiling unrefined at draft (their radiosity
-# 40-145 % off Mitsuba's).  In the Cornell box and the family's rooms this level is 0.95-1.0 of
-# the brightest leaf's.
+# surface area reaches or exceeds: the brightest leaves' level, but not a hot spot's (a lamp
+# shade's inside would leave the room unrefined)
 BRIGHT_AREA = 0.001
 
 
@@ -369,6 +367,11 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     Cancelled (or return False) to stop.  ``light_occluder``: what the leaves' light from
     ``scene.lights`` is cast against instead (a proxy's full mesh), from ``light_lift`` above
     them.
+
+    Its phases: linking (the hierarchy, the first links, clusters: ``_initial_links``), the
+    oracle's refinement (``_refine``), the final links' form factors and visibility
+    (``_final_links``), the leaf system they gather with (``_gathering``: conserved rows,
+    exposure, the lights' direct light), and the per-lamp solve.
     """
     q = get_preset(quality)
     scene.validate_for_solve()
@@ -380,89 +383,120 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
             raise Cancelled(msg)
 
     with timer("setup"):
-        scale = bounding_diagonal(scene.corners)
-        if occluder == "auto":
-            occluder = scene.make_occluder()
-        if occluder is not None:
-            occluder = _CountingOccluder(occluder)
-        h = Hierarchy(scene)
-        total_area = float(h.view("area").sum())
-        min_area = q.min_area * total_area
-        contacts = contact_segments(scene, scale) if q.contact_levels > 0 or q.jitter_origins \
-            else None
-        if q.contact_levels > 0:
-            split_at_contacts(h, *contacts, min_area / 4 ** q.contact_levels)
-        rho_max = scene.rho.max(axis=1)
-        e_max = scene.emission.max(axis=1)
-        receives = rho_max > 0
-        sends = (rho_max > 0) | (e_max > 0)
-        tree = None
-        cX = cY = np.zeros(0, np.int64)
-        if scene.n_patches > q.cluster_above:
-            # Far groups of patches exchange light through cluster links: no O(P^2) start.
-            # The lamps stay out of the clusters: a cluster link carries one visibility for
-            # all its leaves, which the direct light's shadows cannot afford, and the lamps'
-            # links to every patch are few (lamp patches x patches) and refined as usual.
-            is_lamp = scene.lamp >= 0
-            if is_lamp.sum() > LAMP_PATCHES_MAX or is_lamp.all():
-                is_lamp = np.zeros_like(is_lamp)      # (a lamp of many faces: clustered too)
-            tree = build_cluster_tree(scene.corners, np.flatnonzero(~is_lamp))
-            cX, cY, cV, r0, s0 = link_clusters(
-                tree, q.separation,
-                lambda X, Y: cluster_visibility(tree, h, X, Y, occluder, q.rays, rng, scale))
-            lr, ls = initial_pairs(h, receives & ~is_lamp, sends & is_lamp, scale)
-            mr, ms = initial_pairs(h, receives & is_lamp, sends, scale)
-            r0, s0 = np.concatenate([r0, lr, mr]), np.concatenate([s0, ls, ms])
-            keep = receives[r0] & sends[s0]
-            r0, s0 = r0[keep], s0[keep]
-            keep = facing(h, r0, s0, scale)
-            r0, s0 = r0[keep], s0[keep]
-        else:
-            r0, s0 = initial_pairs(h, receives, sends, scale)
-            cV = np.ones(0)
+        start = _initial_links(scene, q, occluder, rng)
+    h, occluder, scale, contacts = start.h, start.occluder, start.scale, start.contacts
+    kept, b_est, b_scale = _refine(scene, q, start, rng, timer, report)
 
+    report(0.7, f"Form factors and visibility for {kept.n} links")
+    receiver, source = kept.receiver, kept.source
+    spread_links = _unresolved_shadows(h, kept, b_est, b_scale, start.rho_max, q,
+                                       start.min_area, occluder, seed, scale, timer, contacts)
+    del kept                            # the oracle's estimates: 77 B a link
+    give_back_memory()
+    with timer("final_links"):
+        links, gather = _final_links(h, receiver, source, occluder, q, rng, scale, spread_links,
+                                     contacts, timer)
+    lamp_occluder = occluder if light_occluder is None else _CountingOccluder(light_occluder)
+    system, gather, light_occ, light_unocc = _gathering(
+        h, gather, start.clusters, occluder, seed, scale, scene, q, lamp_occluder, light_lift,
+        rng, timer)
+    report(0.9, "Solving per-lamp radiosity")
+    with timer("solve"):
+        E = _lamp_emission(scene, system, light_occ)
+        basis, info = system.solve(E, solver or q.solver, tol=q.tol)
+    report(1.0, "Done")
+    rays = occluder.rays if occluder is not None else 0
+    if lamp_occluder is not occluder:            # the lights cast against another mesh
+        rays += lamp_occluder.rays
+    counts = {"rays": rays, "cluster_links": len(start.clusters[1])}
+    context = {"occluder": occluder, "scale": scale, "clusters": start.clusters,
+               "light_occluder": lamp_occluder, "light_lift": light_lift, "contacts": contacts,
+               "spread_links": spread_links}
+    return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
+                             light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
+                             counts, context)
+
+
+@dataclass
+class _Start:
+    """What the refinement starts from (``_initial_links``)."""
+    h: Hierarchy                # split at the contact lines
+    occluder: object            # counting the rays it casts (None: no visibility)
+    scale: float                # the scene's bounding diagonal
+    min_area: float             # the smallest element's area
+    contacts: tuple | None      # contact_segments, where the preset uses them
+    clusters: tuple             # (tree, cX, cY, cV): the cluster links of a large scene
+    r0: np.ndarray              # the first links, receiver and source
+    s0: np.ndarray
+    rho_max: np.ndarray         # per patch, the brightest channel's reflectance and emission
+    e_max: np.ndarray
+
+
+def _initial_links(scene, q: Quality, occluder, rng) -> _Start:
+    """The hierarchy, split at the contact lines, and the first links: patch to patch, or
+    between clusters of patches (and every lamp patch to every patch) in a large scene."""
+    scale = bounding_diagonal(scene.corners)
+    if occluder == "auto":
+        occluder = scene.make_occluder()
+    if occluder is not None:
+        occluder = _CountingOccluder(occluder)
+    h = Hierarchy(scene)
+    total_area = float(h.view("area").sum())
+    min_area = q.min_area * total_area
+    contacts = contact_segments(scene, scale) if q.contact_levels > 0 or q.jitter_origins \
+        else None
+    if q.contact_levels > 0:
+        split_at_contacts(h, *contacts, min_area / 4 ** q.contact_levels)
+    rho_max = scene.rho.max(axis=1)
+    e_max = scene.emission.max(axis=1)
+    receives = rho_max > 0
+    sends = (rho_max > 0) | (e_max > 0)
+    tree = None
+    cX = cY = np.zeros(0, np.int64)
+    if scene.n_patches > q.cluster_above:
+        # Far groups of patches exchange light through cluster links: no O(P^2) start.
+        # The lamps stay out of the clusters: a cluster link carries one visibility for
+        # all its leaves, which the direct light's shadows cannot afford, and the lamps'
+        # links to every patch are few (lamp patches x patches) and refined as usual.
+        is_lamp = scene.lamp >= 0
+        if is_lamp.sum() > LAMP_PATCHES_MAX or is_lamp.all():
+            is_lamp = np.zeros_like(is_lamp)      # (a lamp of many faces: clustered too)
+        tree = build_cluster_tree(scene.corners, np.flatnonzero(~is_lamp))
+        cX, cY, cV, r0, s0 = link_clusters(
+            tree, q.separation,
+            lambda X, Y: cluster_visibility(tree, h, X, Y, occluder, q.rays, rng, scale))
+        lr, ls = initial_pairs(h, receives & ~is_lamp, sends & is_lamp, scale)
+        mr, ms = initial_pairs(h, receives & is_lamp, sends, scale)
+        r0, s0 = np.concatenate([r0, lr, mr]), np.concatenate([s0, ls, ms])
+        keep = receives[r0] & sends[s0]
+        r0, s0 = r0[keep], s0[keep]
+        keep = facing(h, r0, s0, scale)
+        r0, s0 = r0[keep], s0[keep]
+    else:
+        r0, s0 = initial_pairs(h, receives, sends, scale)
+        cV = np.ones(0)
+    return _Start(h, occluder, scale, min_area, contacts, (tree, cX, cY, cV), r0, s0, rho_max,
+                  e_max)
+
+
+def _refine(scene, q: Quality, start: _Start, rng, timer, report):
+    """The oracle's passes: links refined on a radiosity estimate solved on their own
+    estimates, then on the refined links' (q.passes).  Returns the kept links, and the last
+    estimate's per-element radiosity and brightness scale."""
+    h, occluder, scale, min_area, rho_max = (start.h, start.occluder, start.scale,
+                                             start.min_area, start.rho_max)
     lights = _LightEstimates(scene, h, occluder, q.oracle_rays, rng, scale) \
         if len(scene.lights) else None
 
-    def leaf_system(receiver, source, transport):
-        system = LeafSystem.from_links(h, receiver, source, transport, scene.rho)
-        if len(cX):
-            system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
-        return system
-
-    # Per element, for the oracle: radiosity estimate (brightest channel) and its variation
-    # over the element's leaves (the error of gathering from the element's mean radiosity).
-    def estimate_radiosity(links: LinkSet):
-        """Solve on the oracle's estimates: radiosity and its spread per element."""
-        system = leaf_system(links.receiver, links.source, links.F * links.V)
-        E = scene.emission[system.patch]
-        if lights is not None:
-            light_mean, light_spread = lights.get(system.leaves)
-            E = E + system.rho * light_mean
-        B, _ = system.solve(E, "gmres", tol=1e-4)
-        b_leaf = B.max(axis=1)
-        b_elem = system.P_up @ b_leaf
-        # (B - E: the reflected part of every leaf, emitters' included: in a furnace where
-        # every face emits, the emission alone would make the thresholds 1 / (1 - rho) too fine)
-        reflected = (B - scene.emission[system.patch]).max(axis=1)
-        spread = np.maximum(_spread_over_leaves(h, system, b_leaf),
-                            _spread_within(h, links, b_elem, rho_max, q.aggregate))
-        if lights is not None:          # a leaf's own light varies across it
-            spread[system.leaves] = np.maximum(spread[system.leaves],
-                                               rho_max[system.patch] * light_spread)
-        b_scale = _bright_level(reflected, system.leaf_area)
-        if b_scale <= 0:
-            b_scale = float(e_max.max())
-        return b_elem, spread, max(b_scale, 1e-300)
-
     # Start from the patch-to-patch links and a first solution on them.
     with timer("refine"):
-        F, spread, free, partial, Fp = oracle_estimates(h, r0, s0, occluder, q.oracle_rays, rng,
-                                                        scale, timer)
-    kept = LinkSet(r0, s0, F, free, visibility_types(free, partial), spread, Fp)
-    del r0, s0, F, spread, free, partial, Fp       # (kept holds them: freed with it)
+        F, spread, free, partial, Fp = oracle_estimates(h, start.r0, start.s0, occluder,
+                                                        q.oracle_rays, rng, scale, timer)
+    kept = LinkSet(start.r0, start.s0, F, free, visibility_types(free, partial), spread, Fp)
+    start.r0 = start.s0 = None                     # (kept holds them: freed with it)
+    del F, spread, free, partial, Fp
     with timer("solve"):
-        b_est, b_var, b_scale = estimate_radiosity(kept)
+        b_est, b_var, b_scale = _estimate_radiosity(scene, q, start, lights, kept)
     fresh_r = fresh_s = np.zeros(0, np.int64)
     for pass_no in range(q.passes):
         report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
@@ -488,71 +522,101 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
                     fresh_r = fresh_s = np.zeros(0, np.int64)
                     break
                 changed = True
-                r, s = pending.receiver, pending.source
-                old_n = h.n
-                fc_r = h.split(r[split_r])
-                fc_s = h.split(s[split_s])
-                parent = h.parent[old_n:h.n]
-                b_est = np.concatenate([b_est, b_est[parent]])
-                b_var = np.concatenate([b_var, b_var[parent]])
-                four = np.arange(4)
-                nr = np.concatenate([(fc_r[:, None] + four).ravel(), np.repeat(r[split_s], 4)])
-                ns = np.concatenate([np.repeat(s[split_r], 4), (fc_s[:, None] + four).ravel()])
-                ok = facing(h, nr, ns, scale)
-                fresh_r, fresh_s = nr[ok], ns[ok]
+                fresh_r, fresh_s, b_est, b_var = _split_links(h, pending, split_r, split_s,
+                                                              b_est, b_var, scale)
                 pending = LinkSet.empty()
         kept = LinkSet.concat(kept_parts)
         kept_parts = pending = None
         if pass_no + 1 == q.passes or not changed:
             break
         with timer("solve"):
-            b_est, b_var, b_scale = estimate_radiosity(kept)
+            b_est, b_var, b_scale = _estimate_radiosity(scene, q, start, lights, kept)
+    return kept, b_est, b_scale
 
-    report(0.7, f"Form factors and visibility for {kept.n} links")
-    receiver, source = kept.receiver, kept.source
-    spread_links = _unresolved_shadows(h, kept, b_est, b_scale, rho_max, q, min_area, occluder,
-                                       seed, scale, timer, contacts)
-    del kept                            # the oracle's estimates: 77 B a link
+
+def _split_links(h, links: LinkSet, split_r, split_s, b_est, b_var, scale):
+    """Split the receivers ``split_r`` and sources ``split_s`` (bool per link) that the oracle
+    chose: the new links from each split side's children, facing each other, and the
+    estimates extended to the new elements (their parent's)."""
+    r, s = links.receiver, links.source
+    old_n = h.n
+    fc_r = h.split(r[split_r])
+    fc_s = h.split(s[split_s])
+    parent = h.parent[old_n:h.n]
+    b_est = np.concatenate([b_est, b_est[parent]])
+    b_var = np.concatenate([b_var, b_var[parent]])
+    four = np.arange(4)
+    nr = np.concatenate([(fc_r[:, None] + four).ravel(), np.repeat(r[split_s], 4)])
+    ns = np.concatenate([np.repeat(s[split_r], 4), (fc_s[:, None] + four).ravel()])
+    ok = facing(h, nr, ns, scale)
+    return nr[ok], ns[ok], b_est, b_var
+
+
+def _estimate_radiosity(scene, q: Quality, start: _Start, lights, links: LinkSet):
+    """Solve on the oracle's estimates: per element, the radiosity estimate (brightest
+    channel), its variation over the element's leaves (the error of gathering from the
+    element's mean radiosity), and the brightness the thresholds are relative to."""
+    h, rho_max = start.h, start.rho_max
+    tree, cX, cY, cV = start.clusters
+    system = LeafSystem.from_links(h, links.receiver, links.source, links.F * links.V,
+                                   scene.rho)
+    if len(cX):
+        system.add_clusters(*cluster_operator(tree, h, system.leaves, cX, cY, cV))
+    E = scene.emission[system.patch]
+    if lights is not None:
+        light_mean, light_spread = lights.get(system.leaves)
+        E = E + system.rho * light_mean
+    B, _ = system.solve(E, "gmres", tol=1e-4)
+    b_leaf = B.max(axis=1)
+    b_elem = system.P_up @ b_leaf
+    # (B - E: the reflected part of every leaf, emitters' included: in a furnace where
+    # every face emits, the emission alone would make the thresholds 1 / (1 - rho) too fine)
+    reflected = (B - scene.emission[system.patch]).max(axis=1)
+    spread = np.maximum(_spread_over_leaves(h, system, b_leaf),
+                        _spread_within(h, links, b_elem, rho_max, q.aggregate))
+    if lights is not None:          # a leaf's own light varies across it
+        spread[system.leaves] = np.maximum(spread[system.leaves],
+                                           rho_max[system.patch] * light_spread)
+    b_scale = _bright_level(reflected, system.leaf_area)
+    if b_scale <= 0:
+        b_scale = float(start.e_max.max())
+    return b_elem, spread, max(b_scale, 1e-300)
+
+
+def _final_links(h, receiver, source, occluder, q: Quality, rng, scale, spread_links, contacts,
+                 timer=no_timer):
+    """The links' final form factors and visibility (final_links.py) as the preset asks for
+    them, their leaf entries split over near sources' children (source_split.py): (LinkSet,
+    LeafGather)."""
+    F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
+                                           q.quadrature, q.rays, rng, scale, with_leaves=True,
+                                           timer=timer, ff_m=q.ff_quadrature,
+                                           jitter=q.jitter_origins,
+                                           partial_rays=q.partial_rays,
+                                           spread_links=spread_links,
+                                           spread_rays=q.spread_rays,
+                                           fixed=_fixed_origin_leaves(h, contacts, q))
+    give_back_memory()          # the form factors' threads' freed arrays (memory.py)
+    split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
     give_back_memory()
-    with timer("final_links"):
-        F, V, vis, gather = final_form_factors(h, receiver, source, occluder,
-                                               q.quadrature, q.rays, rng, scale, with_leaves=True,
-                                               timer=timer, ff_m=q.ff_quadrature,
-                                               jitter=q.jitter_origins,
-                                               partial_rays=q.partial_rays,
-                                               spread_links=spread_links,
-                                               spread_rays=q.spread_rays,
-                                               fixed=_fixed_origin_leaves(h, contacts, q))
-        give_back_memory()          # the form factors' threads' freed arrays (memory.py)
-        split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
-        give_back_memory()
-    links = LinkSet(receiver, source, F, V, vis)
+    return LinkSet(receiver, source, F, V, vis), gather
 
+
+def _gathering(h, gather, clusters, occluder, seed, scale, scene, q: Quality, lamp_occluder,
+               light_lift, rng, timer=no_timer):
+    """The leaf system the final links gather with (conserved rows, then the exposure of
+    leaves under touching objects) and the lights' direct light on its leaves: (system,
+    GatherRows, light_occ, light_unocc)."""
     with timer("conserve"):
-        system, gather = _final_system(h, gather, (tree, cX, cY, cV), occluder, seed, scale,
-                                       scene, q.quadrature)
+        system, gather = _final_system(h, gather, clusters, occluder, seed, scale, scene,
+                                       q.quadrature)
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
     with timer("lights"):
-        lamp_occluder = occluder if light_occluder is None else _CountingOccluder(light_occluder)
         light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, lamp_occluder,
                                                     q.quadrature, q.rays,
                                                     int(rng.integers(2**31)), scale, light_lift)
-    report(0.9, "Solving per-lamp radiosity")
-    with timer("solve"):
-        E = _lamp_emission(scene, system, light_occ)
-        basis, info = system.solve(E, solver or q.solver, tol=q.tol)
-    report(1.0, "Done")
-    rays = occluder.rays if occluder is not None else 0
-    if lamp_occluder is not occluder:            # the lights cast against another mesh
-        rays += lamp_occluder.rays
-    counts = {"rays": rays, "cluster_links": len(cX)}
-    context = {"occluder": occluder, "scale": scale, "clusters": (tree, cX, cY, cV),
-               "light_occluder": lamp_occluder, "light_lift": light_lift, "contacts": contacts,
-               "spread_links": spread_links}
-    return RadiositySolution(scene, q, h, links, system, gather, np.moveaxis(basis, 2, 0), info,
-                             light_occ, light_unocc, np.ones(scene.n_lamps), dict(timer),
-                             counts, context)
+    return system, gather, light_occ, light_unocc
 
 
 def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=None):
@@ -565,27 +629,14 @@ def regather(solution: RadiositySolution, seed=0, rho_leaf=None, emission_scale=
     h, q, ctx = solution.hierarchy, solution.quality, solution.context
     rng = np.random.default_rng(seed)
     links = solution.links
-    F, V, vis, gather = final_form_factors(h, links.receiver, links.source, ctx.get("occluder"),
-                                           q.quadrature, q.rays, rng, ctx.get("scale", 1.0),
-                                           with_leaves=True, ff_m=q.ff_quadrature,
-                                           jitter=q.jitter_origins,
-                                           partial_rays=q.partial_rays,
-                                           spread_links=ctx.get("spread_links"),
-                                           spread_rays=q.spread_rays,
-                                           fixed=_fixed_origin_leaves(h, ctx.get("contacts"), q))
-    split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)
-    solution.links = LinkSet(links.receiver, links.source, F, V, vis)
-    system, gather = _final_system(h, gather, ctx.get("clusters", (None, (), (), ())),
-                                   ctx.get("occluder"), seed, ctx.get("scale", 1.0),
-                                   solution.scene, q.quadrature)
-    solution.gather = gather
-    _expose(h, system, gather, ctx.get("occluder"), seed, ctx.get("scale", 1.0),
-            solution.scene, q)
-    solution.system = system
+    occluder, scale = ctx.get("occluder"), ctx.get("scale", 1.0)
+    solution.links, gather = _final_links(h, links.receiver, links.source, occluder, q, rng,
+                                          scale, ctx.get("spread_links"), ctx.get("contacts"))
     lamp_occluder, lift = solution.lamp_view()
-    solution.light_occ, solution.light_unocc = lights_on_elements(
-        solution.scene, h, system.leaves, lamp_occluder, q.quadrature, q.rays,
-        int(rng.integers(2**31)), ctx.get("scale", 1.0), lift)
+    (solution.system, solution.gather, solution.light_occ,
+     solution.light_unocc) = _gathering(h, gather, ctx.get("clusters", (None, (), (), ())),
+                                        occluder, seed, scale, solution.scene, q, lamp_occluder,
+                                        lift, rng)
     solve_basis(solution, rho_leaf, emission_scale)
     return solution
 
@@ -635,7 +686,7 @@ def _fixed_origin_leaves(h, contacts, q):
 def _unresolved_shadows(h, links: LinkSet, b_est, b_scale, rho_max, q: Quality, min_area,
                         occluder, seed, scale, timer, contacts):
     """(n,) bool: the links whose near pairs cast ``q.spread_rays`` rays a leaf from spots
-    spread over it (links.final_form_factors; None when the preset has none): bright enough
+    spread over it (final_links.final_form_factors; None when the preset has none): bright enough
     for the BFV criterion (_oracle's ``shadow``), close to their receiver, whose area leaves no
     room to refine a shadow, and partly visible to the oracle's rays, or to confirm_rays x
     as many more where those all agreed (like _confirm_visibility's, which skips such links:

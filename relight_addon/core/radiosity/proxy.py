@@ -14,7 +14,8 @@ the full mesh: core/relight/texel.py) carries the sharp shadows.  So the solve r
 2. the lamp patches (emissive meshes, area lights) are kept as they are;
 3. every input face is mapped to the proxy triangle closest to its centroid on the same side
    (``locate``), which gives each proxy triangle its reflectance (area-weighted mean) and group,
-   and every texel to a proxy triangle and its parameters, where the indirect light is read.
+   and every texel to a proxy triangle and its parameters, where the indirect light is read
+   (core/relight/proxy_texels.py).
 
 ``Proxy.deviation`` (distance from each input face's centroid to the proxy) is what the proxy
 costs geometrically; its cost in light is measured in benchmarks/bench_scan.py against the
@@ -28,13 +29,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.extent import bounding_diagonal
-from ..scene import SceneData, quad_area_normal
+from ..geometry.patch import quad_area_normal
+from ..numerics import nonzero, safe_div
+from ..scene import SceneData
 
 CANDIDATES = 12         # nearest sample points whose triangles are tested first
 SAMPLES_PER_FACE = 8    # proxy sample points per average proxy triangle
 CHUNK = 1 << 14         # points located at once (12-48 candidate triangles each)
-KERNEL_LEAVES = 16      # leaves around each texel that its indirect light is read from
-FACING = 0.5            # ... those whose normal is within 60 degrees of the texel's
 PLANAR = np.cos(np.radians(10.0))
 PLANE_ANGLE = np.cos(np.radians(5.0))
 PLANE_OFFSET = 10.0     # x the roughness: how far from a plane a proxy triangle may lie in it
@@ -166,8 +167,8 @@ def build_proxy(scene: SceneData, faces: int, back_of=None) -> Proxy:
     p = proxy.n_patches
     w = np.bincount(of_patch, area, p)
     rho = np.stack([np.bincount(of_patch, area * scene.rho[:, c], p) for c in range(3)], 1)
-    fallback = (area @ scene.rho[:, :]) / max(area.sum(), 1e-300)
-    rho = np.where(w[:, None] > 0, rho / np.maximum(w, 1e-300)[:, None], fallback)
+    fallback = safe_div(area @ scene.rho[:, :], area.sum())
+    rho = np.where(w[:, None] > 0, rho / nonzero(w)[:, None], fallback)
     rho[~on_surface] = proxy.rho[~on_surface]
     groups, g_inv = np.unique(scene.group, return_inverse=True)
     share = np.zeros((p, len(groups)))
@@ -202,7 +203,7 @@ def plane_normals(sums, centres, tolerance):
     (the clean room 0.45) and relit with a lamp off at 1.10 CIEDE2000 (0.58 with the planes'
     normals).  A triangle that no plane takes keeps its own mean."""
     weight = np.linalg.norm(sums, axis=1)
-    unit = sums / np.maximum(weight, 1e-300)[:, None]
+    unit = sums / nonzero(weight)[:, None]
     label = np.where(weight > 0, -1, -2)
     for i in np.argsort(-weight, kind="stable"):
         if label[i] != -1:
@@ -215,7 +216,7 @@ def plane_normals(sums, centres, tolerance):
     inside = np.flatnonzero(label >= 0)
     total = np.zeros_like(sums)
     np.add.at(total, label[inside], sums[inside])
-    total /= np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
+    total /= nonzero(np.linalg.norm(total, axis=1))[:, None]
     out[inside] = total[label[inside]]
     return out
 
@@ -333,7 +334,7 @@ def locate(proxy: SceneData, points, normals, allowed=None):
     on the proxy's triangles that face the same way as its normal (any triangle when none
     near it does).  Exact: the triangles tested are those of every sample point within the
     best distance found + h (every triangle has a sample within h of each of its points)."""
-    find = _finder(proxy, allowed)
+    find = finder(proxy, allowed)
     n_pts = len(points)
     patch = np.empty(n_pts, np.int64)
     u, v, dist = np.empty(n_pts), np.empty(n_pts), np.empty(n_pts)
@@ -343,7 +344,7 @@ def locate(proxy: SceneData, points, normals, allowed=None):
     return patch, u, v, dist
 
 
-def _finder(proxy: SceneData, allowed=None):
+def finder(proxy: SceneData, allowed=None):
     """:func:`locate` for one chunk of points (at most CHUNK), the proxy's samples and their
     tree built once."""
     ids = np.flatnonzero(proxy.lamp < 0 if allowed is None else allowed)
@@ -378,32 +379,9 @@ def _finder(proxy: SceneData, allowed=None):
             k = min(4 * k, len(spts))
         lb, lc = best_b[:, 1], best_b[:, 2]
         v = np.clip(lc, 0.0, 1.0)
-        u = np.clip(np.where(v < 1.0 - 1e-12, lb / np.maximum(1.0 - v, 1e-300), 0.5), 0.0, 1.0)
+        u = np.clip(np.where(v < 1.0 - 1e-12, safe_div(lb, 1.0 - v), 0.5), 0.0, 1.0)
         return best_t, u, v, best_d
     return find
-
-
-def texels_on(proxy: Proxy, scene: SceneData, tm):
-    """The texel map ``tm`` of ``scene`` with every texel's patch and parameters on the proxy
-    instead (the same images, texel order and dtypes): where the solution's light is read.
-    Located CHUNK texels at a time: a photo's texels are tens of millions."""
-    import dataclasses  # noqa: PLC0415
-
-    from ..scene import bilinear_point  # noqa: PLC0415
-    from ..texture.mapping import TexelMap  # noqa: PLC0415
-    normal = scene.area_normal()[1]
-    find = _finder(proxy.scene)
-    images = []
-    for im in tm.images:
-        patch = np.empty(len(im), im.patch.dtype)
-        u, v = np.empty(len(im), im.u.dtype), np.empty(len(im), im.v.dtype)
-        for c0 in range(0, len(im), CHUNK):
-            sl = slice(c0, c0 + CHUNK)
-            face = im.patch[sl]
-            pts = bilinear_point(scene.corners[face], im.u[sl], im.v[sl])
-            patch[sl], u[sl], v[sl], _ = find(pts, normal[face])
-        images.append(dataclasses.replace(im, patch=patch, u=u, v=v))
-    return TexelMap(images)
 
 
 def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
@@ -421,7 +399,7 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     acc = area[:, None] * normal
     np.add.at(acc, i, area[j, None] * normal[j])
     np.add.at(acc, j, area[i, None] * normal[i])
-    smooth = acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
+    smooth = acc / nonzero(np.linalg.norm(acc, axis=1))[:, None]
     # Roughness: the height of the centroids over the plane of their neighbourhood (its mean
     # point, the smoothed normal).
     mean = area[:, None] * centroid
@@ -430,52 +408,9 @@ def smooth_normals(scene: SceneData, radius: float, crease: float = 0.5):
     np.add.at(mean, j, area[i, None] * centroid[i])
     np.add.at(wsum, i, area[j])
     np.add.at(wsum, j, area[i])
-    mean /= np.maximum(wsum, 1e-300)[:, None]
+    mean /= nonzero(wsum)[:, None]
     height = np.einsum("ij,ij->i", centroid - mean, smooth)
     # robust (1.4826 x the median absolute height): a neighbourhood that takes in a parallel
     # surface nearby (a shelf over a table, a frame on a wall) is no bump of the surface
     roughness = float(1.4826 * np.median(np.abs(height))) if len(height) else 0.0
     return smooth, roughness
-
-
-class SmoothRead:
-    """Values of a solution's leaves read at points of the full mesh by a Gaussian kernel over
-    the leaves near each point that face its way (each leaf's width its own size), instead of
-    interpolating over the proxy's triangles: QEM leaves long thin triangles on flat regions,
-    and an indirect field interpolated over them has their streaks, which the photo does not
-    (the shadow-edge fit read them as lamp-ratio evidence: 10 % off on family room 0)."""
-
-    def __init__(self, hierarchy, leaves, points, normals, neighbours=KERNEL_LEAVES):
-        centre = hierarchy.centroid[leaves]
-        leaf_normal = hierarchy.normal[leaves]
-        width2 = np.maximum(hierarchy.area[leaves], 1e-300)
-        tree = cKDTree(centre)
-        k = min(neighbours, len(leaves))
-        n = len(points)
-        # uint16 (at most 65,536 leaves) or int32 / float32: 96 or 128 bytes a texel instead of
-        # 256 (6.8 M texels of photos: 0.9 GB; the exitance fit's sample of 2 M: 0.2 GB)
-        self.index = np.empty((n, k), np.uint16 if len(leaves) <= 1 << 16 else np.int32)
-        self.weight = np.empty((n, k), np.float32)
-        for c0 in range(0, n, CHUNK):
-            p = points[c0:c0 + CHUNK]
-            d, idx = tree.query(p, k=k)
-            d, idx = d.reshape(len(p), k), idx.reshape(len(p), k)
-            facing = np.einsum("ikj,ij->ik", leaf_normal[idx], normals[c0:c0 + CHUNK]) > FACING
-            w = np.exp(-0.5 * d ** 2 / width2[idx]) * facing
-            # no facing leaf near: the nearest facing one (or the nearest at all)
-            lost = w.sum(axis=1) <= 1e-12
-            if lost.any():
-                pick = np.where(facing[lost].any(axis=1), np.argmax(facing[lost], axis=1), 0)
-                w[lost] = 0.0
-                w[np.flatnonzero(lost), pick] = 1.0
-            self.index[c0:c0 + len(p)] = idx
-            self.weight[c0:c0 + len(p)] = w / w.sum(axis=1, keepdims=True)
-
-    def __call__(self, leaf_values):
-        v = np.asarray(leaf_values, np.float64)
-        flat = v.reshape(len(v), -1)
-        out = np.empty((len(self.index), flat.shape[1]))
-        for c0 in range(0, len(out), CHUNK):      # the gathered (chunk, k, c) values only
-            rows = slice(c0, c0 + CHUNK)
-            out[rows] = np.einsum("tk,tkc->tc", self.weight[rows], flat[self.index[rows]])
-        return out.reshape((len(self.index),) + v.shape[1:])

@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..numerics import nonzero, safe_div
 from .hierarchy import Hierarchy
 
 
@@ -57,7 +58,7 @@ class LeafSystem:
         self.leaf_area = area[self.leaves]
         self.patch = h.patch[self.leaves]
         # Pull: element value = area-weighted mean over its leaves.
-        self.P_up = sp.csr_matrix((self.leaf_area[pos] / np.maximum(area[anc], 1e-300), (anc, pos)),
+        self.P_up = sp.csr_matrix((safe_div(self.leaf_area[pos], area[anc]), (anc, pos)),
                                   shape=(n, L))
         self.M = M
         self.rho = rho_patch[self.patch]                    # (L, 3)
@@ -137,7 +138,7 @@ class LeafSystem:
         return rho * KB
 
     def residual(self, B, E):
-        return float(np.linalg.norm(E + self.apply(B) - B) / max(np.linalg.norm(E), 1e-300))
+        return float(safe_div(np.linalg.norm(E + self.apply(B) - B), np.linalg.norm(E)))
 
     # -- solvers -----------------------------------------------------------------------------
     def solve(self, E, method="gmres", tol=1e-8, maxiter=None):
@@ -160,7 +161,7 @@ class LeafSystem:
         B = E.copy()
         hist = []
         maxiter = maxiter or 10_000
-        norm_e = max(np.linalg.norm(E), 1e-300)
+        norm_e = nonzero(np.linalg.norm(E))
         for it in range(1, maxiter + 1):
             new = E + self.apply(B)
             change = np.linalg.norm(new - B) / norm_e
@@ -191,7 +192,7 @@ class LeafSystem:
             urows = [U_csr[g] for g in groups]
             far = self.W @ B
         hist = []
-        norm_e = max(np.linalg.norm(Ef), 1e-300)
+        norm_e = nonzero(np.linalg.norm(Ef))
         maxiter = maxiter or 10_000
         for it in range(1, maxiter + 1):
             change = 0.0

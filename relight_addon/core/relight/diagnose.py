@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import nonzero, safe_div
 from ..texture.colour import luminance
 from .albedo import RHO_ESTIMATE_MAX
 
@@ -55,20 +56,20 @@ def _point_triangle_distance(p, tris):
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
     ab, ac = b - a, c - a
     n = np.cross(ab, ac)
-    nn = np.maximum((n * n).sum(1), 1e-300)
+    nn = nonzero((n * n).sum(1))
     ap = p - a
     h = (ap * n).sum(1) / nn
     q = p - h[:, None] * n                                    # p projected on the plane
     aq = q - a
     d00, d01, d11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
     d20, d21 = (aq * ab).sum(1), (aq * ac).sum(1)
-    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    den = nonzero(d00 * d11 - d01 * d01)
     v = (d11 * d20 - d01 * d21) / den
     w = (d00 * d21 - d01 * d20) / den
     inside = (v >= 0) & (w >= 0) & (v + w <= 1)
 
     def to_segment(x, y):
-        t = np.clip(((p - x) * (y - x)).sum(1) / np.maximum(((y - x) ** 2).sum(1), 1e-300), 0, 1)
+        t = np.clip(safe_div(((p - x) * (y - x)).sum(1), ((y - x) ** 2).sum(1)), 0, 1)
         return np.linalg.norm(x + (y - x) * t[:, None] - p, axis=1)
 
     edge = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))

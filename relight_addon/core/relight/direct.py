@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point, quad_area_normal
 from ..geometry.sampling import R2, area_uniform_uv
 from ..lights import light_irradiance
 from ..geometry.formfactor import point_kernel, point_to_polygon
 from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
-from ..scene import SceneData, bilinear_point, quad_area_normal
+from ..scene import SceneData
 
 _CHUNK_RAYS = 1 << 17     # rays in flight per call (two may run at once): ~60 MB each
 FIRST_RAYS = 16

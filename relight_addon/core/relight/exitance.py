@@ -16,8 +16,9 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import nnls
 
+from ..geometry.patch import bilinear_point
+from ..numerics import safe_div
 from ..radiosity.presets import get_preset
-from ..scene import bilinear_point
 from ..texture.colour import LUMINANCE, luminance
 from ..texture.mapping import adjacent_texel_pairs, count_adjacent_texel_pairs
 from .albedo import RHO_ESTIMATE_MAX, albedo_rounds
@@ -52,7 +53,7 @@ def fit_lamp_exitance(unit_basis, observed, area, channels_weight=LUMINANCE) -> 
     b = (observed @ channels_weight) * w
     E, rnorm = nnls(A, b)
     rank_deficient = np.linalg.matrix_rank(A) < A.shape[1]
-    return ExitanceFit(E, float(rnorm / max(np.linalg.norm(b), 1e-300)), bool(rank_deficient))
+    return ExitanceFit(E, float(safe_div(rnorm, np.linalg.norm(b))), bool(rank_deficient))
 
 
 @dataclass
@@ -85,25 +86,13 @@ class LampEstimate:
 
 
 # The photo's ratio replaces the user's (mode "user") only when it is pinned down: its
-# uncertainty -- the jackknife's and a bias term (the preset's exitance_bias, 0.05 at medium)
-# -- below PINNED_SIGMA, and its distance from 1 above PINNED_Z of it.  Set on the family's
-# tuning rooms 0, 3, 16, 17, 18 (medium): with exact powers the photo's ratios erred by 0-6 %
-# where the jackknife was below 0.12 (room 17: 21 %, jackknife 0.22), so no exact power was
-# overridden; with powers 30 % off the estimate (6-11 % off) replaced them in every room but
-# 17.  The bias term grows for a lamp with less than an equal share of the direct light
-# (exitance_bias / (k share)): what the model gets wrong about the other lamps' light weighs
-# on its ratio in proportion to their light over its own, and no jackknife over surfaces sees
-# it (every surface shares it).  The weakest lamps of the family's 4-lamp rooms (5 % of the
-# light among 1:4 lamps) were pinned at +15 to +43 % with exact powers.
+# uncertainty (the jackknife's, and the preset's exitance_bias grown for a lamp with less than
+# an equal share of the direct light, on which the other lamps' model error weighs) below
+# PINNED_SIGMA and its distance from 1 above PINNED_Z of it: exact powers stay as set
 PINNED_SIGMA = 0.15
 PINNED_Z = 2.0
-# ... and it replaces it in full from PINNED_Z + PINNED_RAMP sigma on; in between, the photo's
-# log ratio is taken in proportion, so that an estimate near the edge does not flip the result
-# with the solver's seed: a 100k-face scan of family room 5 at high put lamp A (exact power) at
-# 2.016 / 2.012 sigma on seeds 0 / 2 and under 2 on seeds 1, 3, 4, and overriding it cost 0.16
-# CIEDE2000 lamp off.  0.25: the family's corrections with powers 30 % off or unknown lie at
-# 2.3 sigma and beyond (room 0's unknown powers at 2.30 / 2.46; a ramp of 0.5 took part of them
-# and cost 0.2-0.3 CIEDE2000 there), so they are made in full as before.
+# ... and in full from PINNED_Z + PINNED_RAMP sigma on, in proportion in between: an estimate
+# near the edge must not flip the result with the solver's seed
 PINNED_RAMP = 0.25
 JACKKNIFE_FOLDS = 8
 # Rounds of the indirect-light fit (each moves rho^ and solves the albedo again), and the range
@@ -209,9 +198,7 @@ def _fit_rho_mean(sol, tm, photo, scale, texel_light, on, rho_mean, rounds):
     first = edge_fit(sol, tm, photo, scale, texel_light, on)
     f = np.log(first.g)
     if not np.isfinite(first.sigma_vote):
-        # too few pieces vote: the photo does not show its shadows' depth (the test suite's
-        # room of random textures, where the pooled fit's g moved rho^ 0.50 -> 0.35 and the
-        # lamp factor 0.65 -> 3.2 with a photo edit on one wall)
+        # too few pieces vote: the photo does not show its shadows' depth
         return rho_mean, scale, np.inf
     rho_sigma = first.sigma_vote / G_PER_RHO
     best = (abs(f), x, scale.copy())
@@ -253,8 +240,8 @@ def _equal_factors(scene, est, use_patch):
     for j in range(k):
         sel = scene.lamp == j
         if sel.any():
-            e_j = float((area[sel] * lum_emission[sel]).sum() / max(area[sel].sum(), 1e-300))
-            eq_k[j] = e_eq / max(e_j, 1e-300)
+            e_j = float(safe_div((area[sel] * lum_emission[sel]).sum(), area[sel].sum()))
+            eq_k[j] = safe_div(e_eq, e_j)
     return eq_k
 
 
@@ -302,7 +289,7 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
         light, (a, b) = texel_light.subset(rows), inv.reshape(-1, 2).T
         D, I = light.occluded_luminance(sol, scale)
         D, I = D[on], I[on]
-    share = D.sum(axis=1) / max(float(D.sum()), 1e-300)
+    share = safe_div(D.sum(axis=1), float(D.sum()))
     Da, Db, Ia, Ib = D[:, a], D[:, b], I[:, a], I[:, b]
     tiny = 1e-9 * max(float((D + I).sum(axis=0).max()), 1e-300)
 
@@ -348,16 +335,14 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
         per_patch = np.bincount(tm.patch)
         g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, stm, a, b, per_patch, fallback=g)
         if not np.isfinite(sigma_vote):
-            # pieces too small to vote (a fine proxy's triangles): cells of space vote.  Whole
-            # surfaces (below) on family room 5's scan on 6,000 triangles fitted rho^ 0.28
-            # (clean room 0.43): the wall round a cabinet's contact shadows decided
+            # pieces too small to vote (a fine proxy's triangles): cells of space vote, not
+            # whole surfaces, where one region's contact shadows would decide
             cells = SimpleNamespace(patch=np.zeros(len(stm.patch), np.int64), u=stm.u, v=stm.v)
             cells.patch[a] = _space_cells(sol.scene, stm, a, per_patch)
             g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, cells, a, b,
                                     np.ones(int(cells.patch.max(initial=0)) + 1), fallback=g)
         if not np.isfinite(sigma_vote):
-            # too few cells either (family room 22's 20k-triangle scan held rho^ at 0.5, lamp
-            # off 0.85 -> 1.93): whole surfaces (groups) vote
+            # too few cells either: whole surfaces (groups) vote, rather than rho^ staying
             group = np.asarray(sol.scene.group)
             by_group = SimpleNamespace(patch=group[stm.patch], u=stm.u, v=stm.v)
             g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, by_group, a, b,
@@ -387,14 +372,8 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
 # patches are cut into up to VOTE_CELLS^2 cells of their own parameters), at the lamp ratios
 # given: each piece whose total variation has a minimum in g votes for it, with the weight of
 # how sharply it pins g (the second difference over +-VOTE_STEP grid steps) capped at the median
-# piece's, and the weighted median wins.  A pooled fit lets the steepest region decide: in
-# room 5 of the family the wall around a cabinet (contact shadows, whose indirect darkening
-# the element-level indirect light does not resolve) wanted g = 0.2-0.4 where most pieces
-# wanted 1.7-2.5, pulled rho^ to 0.29 (true area mean 0.47) and biased every lamp ratio (the
-# weakest lamp by +43 %).
-# The shadow-edge fit reads at most this many neighbouring texel pairs (every pair of the
-# family's rooms, up to 512 texels a wall: ~0.9 M; the office at 1.17 M texels has 2.3 M, and
-# its Nelder-Mead took 25 of the precompute's 46 s on all of them)
+# piece's, and the weighted median wins: a pooled fit lets the steepest region decide.
+# The shadow-edge fit reads at most this many neighbouring texel pairs (its time grows with them)
 EDGE_PAIRS = 1_000_000
 PAIRS_WHOLE = 8_000_000          # more pairs than this (~4 M texels) are not listed whole
 VOTE_CELLS = 4
@@ -543,7 +522,7 @@ def _weighted_median(values, weights):
     weight."""
     w = np.atleast_2d(np.asarray(weights, float))
     cum = np.cumsum(w, axis=1)
-    at = (cum - 0.5 * w) / np.maximum(cum[:, -1:], 1e-300)
+    at = safe_div(cum - 0.5 * w, cum[:, -1:])
     out = np.array([np.interp(0.5, a[wr > 0], values[wr > 0]) if np.any(wr > 0) else values[0]
                     for a, wr in zip(at, w)])
     return out if np.ndim(weights) == 2 else float(out[0])
@@ -572,4 +551,4 @@ def photo_misfit(sol, tm, photo, use_patch):
         return float("nan")
     a = sol.system.leaf_area[use]
     b, o = luminance(sol.radiosity()[use]), luminance(obs[use])
-    return float(np.sqrt(a @ (b - o) ** 2) / max(np.sqrt(a @ o ** 2), 1e-300))
+    return float(safe_div(np.sqrt(a @ (b - o) ** 2), np.sqrt(a @ o ** 2)))

@@ -31,8 +31,8 @@ from ..geometry.sampling import cosine_directions, quadrature, random_points, \
     stratified_unit_square
 from ..lights import light_irradiance
 from ..radiosity.precompute import lights_on_elements
-from ..texture.mapping import inverse_bilinear, inverse_triangle
-from .settled import may_be_shadowed, may_be_shadowed_at, texel_subset
+from ..texture.mapping import inverse_bilinear, inverse_triangle, texel_subset
+from .settled import may_be_shadowed, may_be_shadowed_at
 from .transport import Transport
 
 CONE_RAYS = 64          # per leaf and object, into the object's bounding cone

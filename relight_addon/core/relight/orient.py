@@ -28,8 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.extent import bounding_diagonal
+from ..geometry.patch import bilinear_point, reverse_winding
 from ..geometry.raycast import ray_offset
-from ..scene import SceneData, bilinear_point
+from ..scene import SceneData
 from ..texture.colour import luminance
 from .direct import lamp_irradiance
 
@@ -57,13 +58,6 @@ class Orientation:
         ids = np.flatnonzero(self.flipped) if which == "flipped" else self.back_of
         g, c = np.unique(group[ids], return_counts=True)
         return {int(a): int(b) for a, b in zip(g, c)}
-
-
-def _reverse(corners):
-    out = corners[:, [0, 3, 2, 1]]
-    tri = np.all(corners[:, 2] == corners[:, 3], axis=tuple(range(1, corners.ndim - 1)))
-    out[tri] = corners[tri][:, [0, 2, 1, 1]]
-    return out
 
 
 def _cosine_directions(normals, n, rng):
@@ -158,13 +152,13 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     new = object.__new__(SceneData)
     new.__dict__.update(scene.__dict__)
     corners = scene.corners.copy()
-    corners[flipped] = _reverse(scene.corners[flipped])
+    corners[flipped] = reverse_winding(scene.corners[flipped])
     uv = None
     if scene.uv is not None:
         uv = scene.uv.copy()
-        uv[flipped] = _reverse(scene.uv[flipped])
+        uv[flipped] = reverse_winding(scene.uv[flipped])
     b = len(back_of)
-    new.corners = np.concatenate([corners, _reverse(corners[back_of])])
+    new.corners = np.concatenate([corners, reverse_winding(corners[back_of])])
     new.rho = np.concatenate([scene.rho, scene.rho[back_of]])
     new.emission = np.concatenate([scene.emission, np.zeros((b, 3))])
     new.lamp = np.concatenate([scene.lamp, np.full(b, -1, scene.lamp.dtype)])
@@ -172,7 +166,7 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     new.group = np.concatenate([scene.group, scene.group[back_of]])
     new.virtual = np.concatenate([scene.virtual, scene.virtual[back_of]])
     if uv is not None:
-        new.uv = np.concatenate([uv, _reverse(uv[back_of])])
+        new.uv = np.concatenate([uv, reverse_winding(uv[back_of])])
     if scene.image is not None:
         new.image = np.concatenate([scene.image, np.full(b, -1, scene.image.dtype)])
     return Orientation(new, flipped, back_of)

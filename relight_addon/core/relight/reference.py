@@ -13,6 +13,7 @@ import numpy as np
 
 from ..geometry.extent import bounding_diagonal
 from ..geometry.raycast import ray_offset
+from ..numerics import safe_div
 from ..texture.colour import lab_distance, luminance
 from ..texture.mapping import element_means, neighbour_element_pairs
 from .maps import clipped_ratio
@@ -48,14 +49,14 @@ def reference_correction(sol, tm, elem, t_inter, HU, Docc_k, DU_k, occluder, opt
     lamp_leaf = sol.scene.lamp[patch] >= 0
     du, do = luminance(DU_k), luminance(Docc_k)                           # (k, L)
     att = np.where(du > 0, do / np.where(du > 0, du, 1.0), 1.0).T
-    share = (du / np.maximum(luminance(HU)[None], 1e-300)).T
+    share = safe_div(du, luminance(HU)[None]).T
     sig = (share >= SIGNIFICANT_SHARE) & (sol.scene.lamp_intensity > 0)[None, :]  # lit in the photo
     shadowed = np.any(sig & (att < 1 - VIS_TOL), axis=1) & ~lamp_leaf
     lit = ~np.any(sig & (att < 1 - VIS_TOL), axis=1) & ~lamp_leaf & np.any(sig, axis=1)
     means, counts = element_means(t_inter, elem, h.n, hierarchy=h)
     obs = means[leaves]
     has_tex = counts[leaves] > 0
-    rho_inter = obs / np.maximum(HU, 1e-300)                    # physical albedo
+    rho_inter = safe_div(obs, HU)                            # physical albedo
     pairs = neighbour_element_pairs(tm, elem)
     near_shadow = np.zeros(L, bool)
     if len(pairs):

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
+from ..numerics import safe_div
 from ..radiosity.links import INVISIBLE, PARTIAL, VISIBLE
 from ..radiosity.presets import get_preset
-from ..scene import bilinear_point
 from ..texture.colour import lab_distance, linear_rgb_to_lab, luminance
 from ..texture.mapping import element_means, neighbour_element_pairs, texel_elements
 from .direct import lamp_irradiance
@@ -33,7 +34,7 @@ def visibility_class(att):
 
 def lab_of(values, white):
     """CIE LAB of linear values normalised by ``white`` (clipped at 0)."""
-    return linear_rgb_to_lab(np.clip(np.nan_to_num(values) / max(white, 1e-300), 0.0, None))
+    return linear_rgb_to_lab(np.clip(safe_div(np.nan_to_num(values), white), 0.0, None))
 
 
 def probe_attenuation(sol, elements, occluder, opt, scale, uv_points):
@@ -46,7 +47,7 @@ def probe_attenuation(sol, elements, occluder, opt, scale, uv_points):
                            opt.seed + 7, scale)
     u, o = luminance(U), luminance(O)
     att = np.where(u > 0, o / np.where(u > 0, u, 1.0), 1.0)
-    share = u / np.maximum(u.sum(axis=1, keepdims=True), 1e-300)
+    share = safe_div(u, u.sum(axis=1, keepdims=True))
     m = len(uv_points)
     return att.reshape(len(elements), m, -1), share.reshape(len(elements), m, -1)
 

@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import make_occluder
 from ..lights import AREA, SUN
-from ..scene import bilinear_point
+from ..numerics import safe_div
 from ..texture.colour import LUMINANCE
-from ..texture.mapping import CoveredTexels, TexelMap, dilate_seams
+from ..texture.mapping import dilate_seams, texel_subset
 from .maps import SEAM_PIXELS
 from .texel import TexelLight
 
@@ -55,8 +56,8 @@ def _lamp_spheres(scene):
 
 
 def _angle(a, b):
-    cos = np.einsum("ij,ij->i", a, b) / np.maximum(
-        np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+    cos = safe_div(np.einsum("ij,ij->i", a, b),
+                   np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
     return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
@@ -81,7 +82,7 @@ def may_be_shadowed_at(scene, x, foot, triangles, margin=1.25):
     R = margin * float(np.linalg.norm(tri - c, axis=1).max()) + foot
     to_c = c - x
     d_c = np.linalg.norm(to_c, axis=1)
-    half_obj = np.arcsin(np.clip(R / np.maximum(d_c, 1e-300), 0.0, 1.0))
+    half_obj = np.arcsin(np.clip(safe_div(R, d_c), 0.0, 1.0))
     out = d_c <= R
     for _, centre, r, sun, sun_half in _lamp_spheres(scene):
         if sun is not None:
@@ -89,20 +90,9 @@ def may_be_shadowed_at(scene, x, foot, triangles, margin=1.25):
             continue
         to_l = centre - x
         d_l = np.linalg.norm(to_l, axis=1)
-        half_lamp = np.arcsin(np.clip((r + foot) / np.maximum(d_l, 1e-300), 0.0, 1.0))
+        half_lamp = np.arcsin(np.clip(safe_div(r + foot, d_l), 0.0, 1.0))
         out |= (d_c - R < d_l) & (_angle(to_c, to_l) <= half_obj + half_lamp)
     return out
-
-
-def texel_subset(texel_map, mask):
-    """The texels of ``texel_map`` where ``mask`` (T,) holds, in the same order."""
-    images, start = [], 0
-    for im in texel_map.images:
-        m = mask[start:start + len(im)]
-        start += len(im)
-        images.append(CoveredTexels(im.shape, im.texel_index[m], im.patch[m], im.u[m], im.v[m],
-                                    im.coverage))
-    return TexelMap(images)
 
 
 def object_visibility(scene, texel_map, triangles, rays=RAYS, samples=SAMPLES,

@@ -32,10 +32,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..numerics import safe_div
 from ..radiosity.memory import give_back_memory
 from ..radiosity.precompute import Cancelled, regather, solve_basis, solve_radiosity
 from ..radiosity.presets import PROXY_FACTOR, get_preset
-from ..radiosity.proxy import build_proxy, texels_on
+from ..radiosity.proxy import build_proxy
 from ..scene import SceneData
 from ..texture.colour import luminance
 from ..texture.mapping import patch_means, rasterize_patches, texel_elements, vertex_interpolate
@@ -44,9 +45,10 @@ from .exitance import fit_lamps, photo_misfit
 from .orient import orient
 from .maps import (clipped_ratio, map_images, maps_from,
                    ratio_maps, texels_of, texture_images)
+from .proxy_texels import texels_on
 from .reference import reference_correction
 from .refine import refine_by_texture
-from .texel import TexelLight
+from .texel import BUMPS, TexelLight, texel_light_for
 from .texel_maps import texel_maps
 from .transport import Transport, as_given
 
@@ -114,7 +116,7 @@ class ShadowFreeResult:
         offset, how the solution is read: a proxy's kernel), for ``scene``: the run's scene,
         or one with other lamps or objects (virtual ones, with their ``occluder``)."""
         proxy = self.solution.context.get("proxy") if self.solution is not None else None
-        return _texel_light(self.scene if scene is None else scene, self.texel_map,
+        return texel_light_for(self.scene if scene is None else scene, self.texel_map,
                             self.occluder if occluder is None else occluder, self.options,
                             seed, proxy, self.solution_texels)
 
@@ -179,7 +181,45 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     stage = _Stage(progress, timings)
     if occluder == "auto":
         occluder = scene.make_occluder()
+    run = _read(scene, opt, occluder, reuse, stage, timings)
+    _initialise(run, reuse)
+    if opt.mode == "none":
+        return _drb97(run)
+    if opt.mode == "texel":
+        return _per_texel(run)
+    return _per_element(run)
 
+
+@dataclass
+class _Run:
+    """One shadow-free run as its steps fill it in."""
+    opt: ShadowFreeOptions
+    stage: _Stage
+    timings: dict
+    scene: SceneData              # oriented (orient.py)
+    orientation: object
+    occluder: object
+    tm: object                    # TexelMap of the scene's images
+    photo: np.ndarray | None      # (T, 3) float32 texels of the photos
+    proxy: object                 # radiosity.proxy.Proxy, or None
+    rad_scene: SceneData          # what the radiosity is solved on: the scene or its proxy
+    rad_tm: object                # the texels on it
+    rad_image: np.ndarray
+    rad_occluder: object
+    texel_light: TexelLight
+    # filled in by _initialise: the photographed patches, their area, eq 4.1's estimate, the
+    # first solution, the lamps' exitances and the solution's misfit to the photo
+    use_patch: np.ndarray | None = None
+    est_ids: np.ndarray | None = None
+    area: np.ndarray | None = None
+    solution: object = None
+    lamps: object = None
+    misfit: float | None = None
+
+
+def _read(scene, opt, occluder, reuse, stage, timings) -> _Run:
+    """Faces turned to their photographed side, the photos' texels, the radiosity proxy of a
+    dense mesh, and the per-texel light."""
     orientation = None
     if opt.orient:
         stage(0.0, "Orienting faces")
@@ -206,12 +246,19 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         rad_scene, rad_tm = proxy.scene, texels_on(proxy, scene, tm)
         rad_occluder = proxy.scene.make_occluder() if occluder is not None else None
         rad_image = np.where(np.bincount(rad_tm.patch, minlength=proxy.n_patches) > 0, 0, -1)
-    texel_light = _texel_light(scene, tm, occluder, opt, opt.seed, proxy, rad_tm)
+    texel_light = texel_light_for(scene, tm, occluder, opt, opt.seed, proxy, rad_tm)
+    return _Run(opt, stage, timings, scene, orientation, occluder, tm, photo, proxy, rad_scene,
+                rad_tm, rad_image, rad_occluder, texel_light)
 
-    # 1. Initialisation: eq 4.1 per patch, first solution, exitances, per-leaf albedo.
+
+def _initialise(run: _Run, reuse):
+    """1. Initialisation (§4.2.1): eq 4.1 per patch, the first solution, the lamps' exitances
+    and the per-leaf albedo."""
+    opt, stage, proxy, orientation = run.opt, run.stage, run.proxy, run.orientation
+    rad_scene, rad_tm, photo = run.rad_scene, run.rad_tm, run.photo
     stage(0.02, "Estimating reflectances (eq 4.1)")
     patch_mean, cnt = patch_means(rad_tm, photo, rad_scene.n_patches)
-    use_patch = (rad_image >= 0) & (cnt > 0) & (rad_scene.lamp < 0)   # the photographed surfaces
+    use_patch = (run.rad_image >= 0) & (cnt > 0) & (rad_scene.lamp < 0)  # photographed surfaces
     est_ids = np.flatnonzero(use_patch)
     area = rad_scene.area_normal()[0]
     rho_patch = rad_scene.rho.copy()
@@ -219,6 +266,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
     if len(est_ids):
         est = estimate_reflectance(patch_mean[est_ids], area[est_ids], opt.rho_mean)
         rho_patch[est_ids] = est.rho
+    del patch_mean
     backs = orientation.back_of if proxy is None and orientation is not None else \
         (proxy.back_of if proxy is not None else ())
     if len(backs):
@@ -241,56 +289,87 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         lamp_view = {}
         if proxy is not None:
             quality = quality.with_(contact_levels=0)
-            lamp_view = _proxy_lamp_view(proxy, occluder)
-        sol = solve_radiosity(scene1, quality, occluder=rad_occluder, seed=opt.seed,
+            lamp_view = _proxy_lamp_view(proxy, run.occluder)
+        sol = solve_radiosity(scene1, quality, occluder=run.rad_occluder, seed=opt.seed,
                               progress=stage.sub(0.05, 0.4), **lamp_view)
         sol.context["proxy"] = proxy
     stage(0.4, "Lamp exitances and reflectances")
-    lamps = fit_lamps(sol, rad_tm, photo, use_patch, est, opt, texel_light)
-    scale_k = lamps.scale
-    misfit = photo_misfit(sol, rad_tm, photo, use_patch)
+    run.lamps = fit_lamps(sol, rad_tm, photo, use_patch, est, opt, run.texel_light)
+    run.misfit = photo_misfit(sol, rad_tm, photo, use_patch)
+    run.solution, run.use_patch, run.est_ids, run.area = sol, use_patch, est_ids, area
 
-    def result(texture, maps, coverage, solution, first=None, stats=None, reference_info=None,
-               denominator=None, direct=None):
-        stage(1.0, None)
-        stats = {**_stats(solution, first), "photo_misfit": misfit, **(stats or {})}
-        if proxy is not None:
-            a = scene.area_normal()[0]
-            stats.update(proxy_faces=proxy.n_patches, input_faces=scene.n_patches,
-                         proxy_deviation=float(a @ proxy.deviation / max(a.sum(), 1e-300)))
-        if orientation is not None:
-            stats.update(flipped=orientation.per_group("flipped"),
-                         two_sided=orientation.per_group("two_sided"))
-        return ShadowFreeResult(opt, tm, texture, maps, coverage, lamps,
-                                solution, first, stats, timings, reference_info, use_patch,
-                                denominator, occluder, direct, scene, rad_tm)
 
-    # 4. DRB97: the photo as it is, maps B_k / sum B.
-    if opt.mode == "none":
-        stage(0.9, "Display maps")
-        mp, cov = map_images(tm, ratio_maps(sol, rad_tm, weights=scene.lamp_intensity))
-        return result(texture_images(tm, photo, scene.images), mp, cov, sol)
+def _result(run: _Run, texture, maps, coverage, solution, first=None, stats=None,
+            reference_info=None, denominator=None, direct=None) -> ShadowFreeResult:
+    run.stage(1.0, None)
+    scene, proxy, orientation = run.scene, run.proxy, run.orientation
+    stats = {**_stats(solution, first), "photo_misfit": run.misfit, **(stats or {})}
+    if proxy is not None:
+        a = scene.area_normal()[0]
+        stats.update(proxy_faces=proxy.n_patches, input_faces=scene.n_patches,
+                     proxy_deviation=float(safe_div(a @ proxy.deviation, a.sum())))
+    if orientation is not None:
+        stats.update(flipped=orientation.per_group("flipped"),
+                     two_sided=orientation.per_group("two_sided"))
+    return ShadowFreeResult(run.opt, run.tm, texture, maps, coverage, run.lamps,
+                            solution, first, stats, run.timings, reference_info, run.use_patch,
+                            denominator, run.occluder, direct, scene, run.rad_tm)
 
-    # 2. Per texel: direct light ray-cast at every texel, indirect from the solution.
-    if opt.mode == "texel":
-        stage(0.6, "Per-texel irradiance and maps")
-        del photo, patch_mean            # read again block by block: not held at the peak
-        texel_light.release()
-        give_back_memory()
-        out = texel_maps(texel_light, sol, scale_k, scene, scene.images)
-        return result(out.texture, out.maps, out.coverage, sol, denominator=out.denominator,
-                      direct=out.direct)
 
-    # 3. Per element (the seed's pipeline).
+def _drb97(run: _Run) -> ShadowFreeResult:
+    """4. DRB97: the photo as it is, maps B_k / sum B."""
+    run.stage(0.9, "Display maps")
+    sol, tm, scene = run.solution, run.tm, run.scene
+    mp, cov = map_images(tm, ratio_maps(sol, run.rad_tm, weights=scene.lamp_intensity))
+    return _result(run, texture_images(tm, run.photo, scene.images), mp, cov, sol)
+
+
+def _per_texel(run: _Run) -> ShadowFreeResult:
+    """2. Per texel: direct light ray-cast at every texel, indirect from the solution."""
+    run.stage(0.6, "Per-texel irradiance and maps")
+    run.photo = None                 # read again block by block: not held at the peak
+    run.texel_light.release()
+    give_back_memory()
+    sol, scene = run.solution, run.scene
+    out = texel_maps(run.texel_light, sol, run.lamps.scale, scene, scene.images)
+    return _result(run, out.texture, out.maps, out.coverage, sol, denominator=out.denominator,
+                   direct=out.direct)
+
+
+def _per_element(run: _Run) -> ShadowFreeResult:
+    """3. Per element (the seed's pipeline): texture-based refinement, T_inter and T_final
+    (eq 4.5-4.9), then a fresh solution on T_final whose B / D gives the maps."""
+    opt, sol, tm, photo = run.opt, run.solution, run.tm, run.photo
     white = float(np.percentile(luminance(photo), 99)) if len(photo) else 1.0
     if opt.refine:
-        stage(0.45, "Texture-based refinement")
-        refine_by_texture(sol, tm, photo, white, occluder, opt, scale_k)
+        run.stage(0.45, "Texture-based refinement")
+        refine_by_texture(sol, tm, photo, white, run.occluder, opt, run.lamps.scale)
         regather(sol, opt.seed + 1)
-        albedo_rounds(sol, tm, photo, use_patch, lamps.rho_mean, opt.albedo_rounds, scale_k)
+        albedo_rounds(sol, tm, photo, run.use_patch, run.lamps.rho_mean, opt.albedo_rounds,
+                      run.lamps.scale)
+    t_final, counts, reference_info = _t_final(run)
+    first, sol = sol, _fresh_solution(run, t_final, white)
+    run.stage(0.92, "Display maps")
+    scene = run.scene
+    Hocc_k, HU_k, _, _ = Transport(sol).irradiance(sol.basis)
+    elem = texel_elements(sol.hierarchy, tm)
 
-    # First modification (eq 4.5, 4.6).
-    stage(0.6, "Blocked irradiance and T_inter (eq 4.5, 4.6)")
+    def per_texel(leaf_vals):          # smooth per-texel values of the fresh solution
+        return vertex_interpolate(sol.hierarchy, leaf_vals, tm, elem)
+    maps = maps_from(np.stack([per_texel(x) for x in Hocc_k]), per_texel(as_given(HU_k, scene)))
+    mp, cov = map_images(tm, maps)
+    n_shadowed, n_frontier, n_ref, n_default = counts
+    return _result(run, texture_images(tm, t_final, scene.images), mp, cov, sol, first,
+                   dict(shadowed_leaves=n_shadowed, frontier_leaves=n_frontier,
+                        referenced=n_ref, default_reference=n_default), reference_info)
+
+
+def _t_final(run: _Run):
+    """The first modification (eq 4.5, 4.6: blocked irradiance, T_inter), then the second
+    (frontier, references, rho_corr, T_final: eq 4.8, 4.9) when ``opt.reference``: (T_final,
+    (shadowed, frontier, referenced, default-referenced leaves), reference info)."""
+    opt, sol, tm, scene = run.opt, run.solution, run.tm, run.scene
+    run.stage(0.6, "Blocked irradiance and T_inter (eq 4.5, 4.6)")
     Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
     elem = texel_elements(sol.hierarchy, tm)
 
@@ -298,59 +377,40 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         return vertex_interpolate(sol.hierarchy, leaf_vals, tm, elem)
 
     HU = as_given(HU_k, scene)
-    t_inter = photo * clipped_ratio(per_texel(HU), per_texel(as_given(Hocc_k, scene)), fmin=1.0)
-
-    # Second modification: frontier, references, rho_corr, T_final (eq 4.8, 4.9).
-    stage(0.7, "Frontier and reference elements (eq 4.8, 4.9)")
+    t_inter = run.photo * clipped_ratio(per_texel(HU), per_texel(as_given(Hocc_k, scene)),
+                                        fmin=1.0)
+    run.stage(0.7, "Frontier and reference elements (eq 4.8, 4.9)")
     counts = (0, 0, 0, 0)
     t_final = t_inter
     reference_info = None
     if opt.reference:
         corr, counts, codes = reference_correction(sol, tm, elem, t_inter, HU, Docc_k,
-                                                   DU_k, occluder, opt)
+                                                   DU_k, run.occluder, opt)
         reference_info = {"hierarchy": sol.hierarchy, "leaves": sol.leaves.copy(), "codes": codes}
         t_final = t_inter * per_texel(corr)
+    return t_final, counts, reference_info
 
-    # Fresh solution on T_final: B with visibility, D from its unoccluded gather.
-    stage(0.75, "Fresh solution on T_final")
-    first = sol
+
+def _fresh_solution(run: _Run, t_final, white):
+    """§4.3.3: a fresh solution on the reflectances of T_final (B with visibility, D from its
+    unoccluded gather), refined by texture and its albedo re-estimated as the first was."""
+    opt, tm, scene, orientation = run.opt, run.tm, run.scene, run.orientation
+    scale_k, est_ids, area = run.lamps.scale, run.est_ids, run.area
+    run.stage(0.75, "Fresh solution on T_final")
     pm, _ = patch_means(tm, t_final, scene.n_patches)
     rho2 = scene.rho.copy()
     if len(est_ids):
-        rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], lamps.rho_mean).rho
+        rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], run.lamps.rho_mean).rho
     if orientation is not None and len(orientation.back_of):
         rho2[-len(orientation.back_of):] = rho2[orientation.back_of]
-    sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=occluder,
-                          seed=opt.seed + 2, progress=stage.sub(0.75, 0.9))
+    sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=run.occluder,
+                          seed=opt.seed + 2, progress=run.stage.sub(0.75, 0.9))
     if opt.refine:
-        refine_by_texture(sol, tm, t_final, white, occluder, opt, scale_k, colour=False)
+        refine_by_texture(sol, tm, t_final, white, run.occluder, opt, scale_k, colour=False)
         regather(sol, opt.seed + 3)
-    albedo_rounds(sol, tm, t_final, use_patch, lamps.rho_mean, opt.albedo_rounds, scale_k,
-                  unoccluded=True)
-    stage(0.92, "Display maps")
-    Hocc_k, HU_k, _, _ = Transport(sol).irradiance(sol.basis)
-    elem = texel_elements(sol.hierarchy, tm)
-    maps = maps_from(np.stack([per_texel(x) for x in Hocc_k]), per_texel(as_given(HU_k, scene)))
-    mp, cov = map_images(tm, maps)
-    n_shadowed, n_frontier, n_ref, n_default = counts
-    return result(texture_images(tm, t_final, scene.images), mp, cov, sol, first,
-                  dict(shadowed_leaves=n_shadowed, frontier_leaves=n_frontier, referenced=n_ref,
-                       default_reference=n_default), reference_info)
-
-
-# A scan's direct light is cast from this many RMS bump heights above its faces: its noise
-# would shadow grazing rays that the photographed, smooth surface lets through.
-BUMPS = 3.0
-
-
-def _texel_light(scene, tm, occluder, opt, seed, proxy, solution_texels):
-    """Per-texel light on ``tm`` of ``scene``; on a proxy's scan: its shading normals, rays
-    lifted over its bumps, the solution read by the proxy's kernel."""
-    return TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, seed,
-                      solution_texels=solution_texels,
-                      face_normals=None if proxy is None else proxy.normals,
-                      smooth_read=proxy is not None,
-                      offset=0.0 if proxy is None else BUMPS * proxy.roughness)
+    albedo_rounds(sol, tm, t_final, run.use_patch, run.lamps.rho_mean, opt.albedo_rounds,
+                  scale_k, unoccluded=True)
+    return sol
 
 
 def _proxy_lamp_view(proxy, occluder):

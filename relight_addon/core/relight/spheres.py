@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import nonzero
+
 SAMPLES_PER_SPHERE = 200     # samples per sphere (the seed used 1000 per sphere)
 LLOYD_ITERATIONS = 30
 MIN_INSIDE = 0.02            # inside fraction of the bounding box below which there is no volume
@@ -96,7 +98,7 @@ def silhouette_sphere(triangles):
     tri = np.asarray(triangles, float).reshape(-1, 3, 3)
     area = np.nan_to_num(0.5 * np.linalg.norm(
         np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1))
-    total = max(float(area.sum()), 1e-300)
+    total = nonzero(float(area.sum()))
     centre = (tri.mean(axis=1) * area[:, None]).sum(0) / total
     return centre, float(np.sqrt(total / (4.0 * np.pi)))
 

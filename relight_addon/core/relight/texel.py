@@ -10,9 +10,10 @@ place in the whole map), so the result does not depend on scheduling, nor on whe
 for the whole map or block by block.
 
 Photo-resolution textures (four 2048^2 photos: 16 M texels) are not held whole: while the direct
-light of every texel and lamp fits in CACHE_BYTES it is kept (the exitance fit and the maps both
-read it), past that :meth:`TexelLight.rows` gives a block of texels whose light is cast when it
-is read, and the caller streams (texel_maps.py, the exitance fit's sample of texels).
+light of every texel and lamp fits in TEXEL_CACHE_BYTES (radiosity.memory) it is kept (the
+exitance fit and the maps both read it), past that :meth:`TexelLight.rows` gives a block of
+texels whose light is cast when it is read, and the caller streams (texel_maps.py, the exitance
+fit's sample of texels).
 """
 from __future__ import annotations
 
@@ -20,19 +21,20 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
 from ..radiosity.exposure import read_in_the_open
-from ..radiosity.memory import give_back_memory
-from ..scene import bilinear_point
+from ..radiosity.memory import TEXEL_CACHE_BYTES, give_back_memory
 from ..texture.colour import luminance
 from ..texture.mapping import (CornerInterpolation, inverse_bilinear, inverse_triangle,
-                               uv_patch_is_triangle, vertex_interpolate)
+                               texel_subset, uv_patch_is_triangle, vertex_interpolate)
 from .direct import lamp_irradiance
+from .proxy_texels import SmoothRead
 from .transport import Transport
 
 TEXEL_CHUNK = 1 << 13     # texels whose direct light is computed at once
-# the direct light of every texel and lamp (unoccluded and occluded, float64) is kept while it
-# takes at most this much; a larger map is cast block by block when it is read
-CACHE_BYTES = 256 * 2**20
+# A scan's direct light is cast from this many RMS bump heights above its faces: its noise
+# would shadow grazing rays that the photographed, smooth surface lets through.
+BUMPS = 3.0
 
 
 class TexelLight:
@@ -45,7 +47,7 @@ class TexelLight:
         # (p, 3) shading normals of the scene's faces instead of their own, read at each
         # texel's face when needed (a (T, 3) copy is 24 bytes a texel: 370 MB at 15 M)
         self.face_normals = face_normals
-        # indirect light read by a kernel over the leaves (radiosity.proxy.SmoothRead) instead
+        # indirect light read by a kernel over the leaves (proxy_texels.SmoothRead) instead
         # of interpolated over the solution's elements
         self.smooth_read = smooth_read
         self.offset = offset          # ray origins lifted at least this far off the surface
@@ -61,7 +63,7 @@ class TexelLight:
     @property
     def keeps_direct(self) -> bool:
         """Whether the direct light of every texel is kept once cast (else: read by blocks)."""
-        return 48 * self.tm.n_texels * max(self.scene.n_lamps, 1) <= CACHE_BYTES
+        return 48 * self.tm.n_texels * max(self.scene.n_lamps, 1) <= TEXEL_CACHE_BYTES
 
     def direct(self):
         """Direct irradiance (T, k, 3) from each lamp at unit exitance factor, unoccluded and
@@ -89,7 +91,6 @@ class TexelLight:
     def subset(self, rows):
         """This light on the texels ``rows`` (sorted indices): their own rays (a sample of
         the map, e.g. the exitance fit's); the direct light already cast is shared."""
-        from .settled import texel_subset
         key = (len(rows), hash(np.asarray(rows).tobytes()))
         if self._subset[0] == key:              # the exitance fit asks for it at every round
             return self._subset[1]
@@ -141,7 +142,6 @@ class TexelLight:
         if self._reader[0] == key:
             return self._reader[1]
         if self.smooth_read:
-            from ..radiosity.proxy import SmoothRead
             patch = self.tm.patch
             points = bilinear_point(self.scene.corners[patch], self.tm.u, self.tm.v)
             read = SmoothRead(sol.hierarchy, sol.leaves, points, self._shading()[patch])
@@ -205,6 +205,17 @@ class TexelLight:
             for c0 in starts:
                 chunk(c0)
         return O if luminance_only else (U, O)
+
+
+def texel_light_for(scene, tm, occluder, opt, seed, proxy, solution_texels):
+    """The TexelLight of a shadow-free run (``opt``: its ShadowFreeOptions) on ``tm`` of
+    ``scene``; on a proxy's scan: its shading normals, rays lifted over its bumps, the
+    solution read by the proxy's kernel."""
+    return TexelLight(scene, tm, occluder, opt.texel_rays, opt.texel_samples, seed,
+                      solution_texels=solution_texels,
+                      face_normals=None if proxy is None else proxy.normals,
+                      smooth_read=proxy is not None,
+                      offset=0.0 if proxy is None else BUMPS * proxy.roughness)
 
 
 def leaf_indirect(sol, unoccluded=True):

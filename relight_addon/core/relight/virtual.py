@@ -144,7 +144,7 @@ def add_objects(result, scene, progress=None):
     only moves, adds or deletes objects starts from again."""
     from .maps import DISPLAY_EPS
     from .object_change import VirtualObjects, irradiance_change
-    from .shadowfree import _texel_light
+    from .texel import texel_light_for
     if result.denominator is None:
         raise ValueError("virtual objects are added to a per-texel result only")
     objects = scene.virtual_last()
@@ -157,7 +157,7 @@ def add_objects(result, scene, progress=None):
 
     def make_light(tm, occluder, seed, samples=None):
         o = opt if samples is None else dataclasses.replace(opt, texel_samples=samples)
-        return _texel_light(texel_scene, tm, occluder, o, seed, proxy,
+        return texel_light_for(texel_scene, tm, occluder, o, seed, proxy,
                             result.solution_texels if tm is result.texel_map else None)
     virtual = VirtualObjects.of(objects, extra)
     if not len(virtual.triangles):                  # no face that can block or reflect

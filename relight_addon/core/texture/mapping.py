@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.extent import longest_side
+from ..numerics import safe_div
 
 # Tolerance (in patch parameter units) for a texel centre lying exactly on a patch edge.
 INSIDE_TOLERANCE = 1e-9
@@ -166,6 +167,17 @@ class TexelMap:
             base[im.texel_index] = values2[off[k]:off[k + 1]]
             out.append(base.reshape((h, w) + values.shape[1:]))
         return out
+
+
+def texel_subset(texel_map, mask):
+    """The texels of ``texel_map`` where ``mask`` (T,) holds, in the same order."""
+    images, start = [], 0
+    for im in texel_map.images:
+        m = mask[start:start + len(im)]
+        start += len(im)
+        images.append(CoveredTexels(im.shape, im.texel_index[m], im.patch[m], im.u[m], im.v[m],
+                                    im.coverage))
+    return TexelMap(images)
 
 
 # ------------------------------------------------------------------------------------------
@@ -410,7 +422,7 @@ def _invert_quads(coef, pid, x, y):
         # u from h = u (e + g v) + v f, least squares over both coordinates (rotation-safe).
         dx = ex + gx * v
         dy = ey + gy * v
-        u = ((hx - fx * v) * dx + (hy - fy * v) * dy) / np.maximum(dx * dx + dy * dy, 1e-300)
+        u = safe_div((hx - fx * v) * dx + (hy - fy * v) * dy, dx * dx + dy * dy)
         # One Newton step polishes the closed form to machine precision.
         rx = ex * u + fx * v + gx * (u * v) - hx
         ry = ey * u + fy * v + gy * (u * v) - hy
