@@ -61,7 +61,8 @@ def user_message(ex) -> str:
 
 
 def solve(data, preset, correction="TEXEL", progress=None, reuse=None, proxy_faces=0):
-    """The bpy-free precompute: shadow-free textures and per-lamp display maps."""
+    """The bpy-free precompute: shadow-free textures and per-lamp display maps (``progress``:
+    a callback, or the reporter of core.progress already running)."""
     from ..core.relight.shadowfree import ShadowFreeOptions, shadow_free
     options = ShadowFreeOptions(mode=correction.lower(), preset=preset,
                                 proxy_faces=int(proxy_faces))
@@ -101,30 +102,35 @@ class Job:
         return self.action in ("solve", "reuse")
 
     def compute(self, progress=None):
-        """The result to write (bpy-free, any thread), or None when nothing is computed."""
-        if self.action == "solve":
-            return solve(self.data, self.preset, self.correction, progress,
-                         proxy_faces=self.proxy_faces)
-        if self.action == "reuse":
-            return solve(self.data, self.preset, self.correction, progress, reuse=self.reuse,
-                         proxy_faces=self.proxy_faces)
-        if self.action == "quick":
-            return _quick(self, progress)
-        if self.action == "rewrite":
-            return self.base
-        return None
+        """The result to write (bpy-free, any thread), or None when nothing is computed.
+        ``progress(fraction, message)`` hears from every stage and from inner loops at least
+        every core.progress.TICK seconds, and may raise core.progress.Cancelled to stop."""
+        from ..core.progress import reporting
+        with reporting(progress):
+            if self.action == "solve":
+                return solve(self.data, self.preset, self.correction,
+                             proxy_faces=self.proxy_faces)
+            if self.action == "reuse":
+                return solve(self.data, self.preset, self.correction, reuse=self.reuse,
+                             proxy_faces=self.proxy_faces)
+            if self.action == "quick":
+                return _quick(self)
+            if self.action == "rewrite":
+                return self.base
+            return None
 
 
-def _quick(job, progress=None):
+def _quick(job):
     """The kept room with its virtual lamps' maps made again where they changed, then the
     virtual objects' change added (core/relight/virtual.py): no new solve."""
+    from ..core.progress import report
     from ..core.relight.virtual import add_lamps, add_objects, keep_lamps
     base = job.base
     names = list(base.solution.scene.lamp_names)
     result = keep_lamps(base, [names.index(n) for n in job.drop if n in names])
+    objects = bool(job.data.virtual.any())
     if job.add:
-        if progress is not None:
-            progress(0.1, "Lighting the scene with the new lamps")
+        report(0.0, "Lighting the room with the virtual lamps", 0.5 if objects else 1.0)
         data = job.data
         lights = data.lights
         ks = [data.lamp_names.index(n) for n in job.add]
@@ -134,9 +140,8 @@ def _quick(job, progress=None):
                                              for f in dataclasses.fields(lights)})
         sub.lamp = np.array([order[int(k)] for k in sub.lamp], np.int32)
         result = add_lamps(result, sub, list(job.add))
-    if job.data.virtual.any():
-        if progress is not None:
-            progress(0.5, "Casting the virtual objects' shadows")
+    if objects:
+        report(0.5 if job.add else 0.0, "Casting the virtual objects' shadows", 1.0)
         result = add_objects(result, job.data)
     elif result.room is not None:
         result = dataclasses.replace(result, room=None)

@@ -30,6 +30,7 @@ import numpy as np
 from ..geometry.extent import bounding_diagonal
 from ..geometry.patch import bilinear_point, reverse_winding
 from ..geometry.raycast import ray_offset
+from ..progress import tick
 from ..scene import SceneData
 from ..texture.colour import luminance
 from .direct import lamp_irradiance
@@ -86,6 +87,7 @@ def side_evidence(scene: SceneData, occluder, patches, seed=0):
     camera = np.zeros((len(patches), 2), bool)
     openness = np.zeros((len(patches), 2))
     for first in range(0, len(patches), CHUNK):
+        tick(first / max(len(patches), 1))
         part = slice(first, first + CHUNK)
         _evidence(scene, occluder, patches[part], normal, size, eps, rng,
                   seed + 2 * (first // CHUNK), lit[part], camera[part], openness[part])
