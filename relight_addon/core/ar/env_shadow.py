@@ -38,9 +38,11 @@ import numpy as np
 
 from ..relight.sphere_shadow import combined_visibility, sphere_visibility, sun_disk
 from ..texture.colour import LUMINANCE
-from .cap import cap_cosine_integral, cone_sin2, seed_cap_cosine_integral
+from .cap import cap_cosine_integral, seed_cap_cosine_integral
+from .cap_filter import sample_cap_filtered
 from .envmap import sample_cube_mips, sample_equirect
-from .irradiance import sh9_basis, sh9_irradiance
+from .irradiance import sh9_basis
+from .main_light import light_irradiance
 
 E_FLOOR = 1e-9          # of the map's mean irradiance: a receiver lit by less is not shadowed
 
@@ -60,6 +62,39 @@ def cap_geometry(points, normals, centre, radius):
     d = np.maximum(np.linalg.norm(to_c, axis=-1), 1e-12)
     axis = to_c / d[:, None]
     return axis, np.einsum("ij,ij->i", axis, normals), (radius / d) ** 2
+
+
+def visible_cap(axis, cos_beta, sin2_alpha, normals):
+    """(axis (n, 3), half-angle (n,)) of the cap standing for the part of a cap above the
+    receiver's horizon: the same top edge, its bottom edge raised to the horizon (elevations
+    max(e - a, 0) .. e + a, e the axis' elevation), so that a sphere dipping below a table top
+    is weighted by the radiance the table top sees, not by the floor under it."""
+    alpha = np.arcsin(np.sqrt(np.clip(sin2_alpha, 0.0, 1.0)))
+    e = np.arcsin(np.clip(cos_beta, -1.0, 1.0))
+    lo, hi = np.maximum(e - alpha, 0.0), e + alpha
+    straddle = (e < alpha) & (hi > 0)
+    t = axis - cos_beta[:, None] * normals
+    tn = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.where(tn > 1e-12, t / np.maximum(tn, 1e-300), axis)
+    e2 = 0.5 * (lo + hi)
+    ax2 = np.cos(e2)[:, None] * t + np.sin(e2)[:, None] * normals
+    return (np.where(straddle[:, None], ax2, axis),
+            np.where(straddle, np.maximum(0.5 * (hi - lo), 0.0), alpha))
+
+
+def cosine_centroid(axis, cos_beta, sin2_alpha, normals):
+    """Unit direction (n, 3) of the cosine-weighted mean of a cap (axis, half-angle alpha)
+    about the receivers' normals: integral of w (w.n) dw over the cap, which is
+    A cos(beta) axis + B (n - cos(beta) axis) with A = 2 pi (1 - cos^3 a) / 3 and
+    B = pi (2/3 - cos a + cos^3 a / 3).  The cap-filtered map read there instead of at the axis
+    gives the cosine-weighted mean radiance exactly for radiance linear in w."""
+    ca = np.sqrt(np.clip(1.0 - sin2_alpha, 0.0, 1.0))
+    A = 2 * np.pi * (1 - ca ** 3) / 3
+    B = np.pi * (2.0 / 3.0 - ca + ca ** 3 / 3)
+    cb = cos_beta[:, None]
+    m = A[:, None] * cb * axis + B[:, None] * (normals - cb * axis)
+    norm = np.linalg.norm(m, axis=1, keepdims=True)
+    return np.where(norm > 1e-12, m / np.maximum(norm, 1e-300), axis)
 
 
 def sh9_cap_radiance(sh, axis, sin2_alpha):
@@ -84,7 +119,7 @@ def _cap_term(cap):
 
 
 def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
-                      weighting="light+sh", cap="exact"):
+                      weighting="light+caps", cap="exact"):
     """Shadow factor (n, 3) in [0, 1] of receivers ``points`` (n, 3) with unit ``normals``
     (n, 3) under ``lighting`` (lighting.EnvironmentLighting), from the spheres ``centres``
     (m, 3), ``radii`` (m,) and the optional ``hull`` = (centre, radius) silhouette sphere
@@ -100,12 +135,24 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
     # the map's mean irradiance: pi x its mean radiance (the SH band-0 coefficient x Y00)
     floor = E_FLOOR * max(float(np.abs(lighting.sh[0]).max()) * np.pi / np.sqrt(4 * np.pi), 1e-300)
 
-    if weighting == "light+sh":
-        e_amb = np.maximum(sh9_irradiance(lighting.sh_ambient, nrm), floor)
+    if weighting in ("light+caps", "light+sh"):
+        # the residual's irradiance: the exact one (irradiance map) less the lights' own
+        e_amb = sample_equirect(lighting.irradiance, nrm)
+        for light in lighting.lights:
+            e_amb = e_amb - light_irradiance(light, nrm)
+        e_amb = np.maximum(e_amb, floor)
 
         def blocked(c, r):
             axis, cb, s2 = cap_geometry(p, nrm, c, r)
-            return sh9_cap_radiance(lighting.sh_ambient, axis, s2) * C(cb, s2)[:, None] / e_amb
+            if weighting == "light+caps":
+                ax2, alpha2 = visible_cap(axis, cb, s2, nrm)
+                rad = sample_cap_filtered(lighting.caps,
+                                          cosine_centroid(ax2, np.einsum("ij,ij->i", ax2, nrm),
+                                                          np.sin(alpha2) ** 2, nrm), alpha2)
+            else:
+                rad = sh9_cap_radiance(lighting.sh_ambient, axis, s2)
+            b = rad * C(cb, s2)[:, None] / e_amb
+            return np.where(s2[:, None] >= 1.0, 1.0, b)       # inside the sphere: all hidden
     elif weighting == "mips":
         e_all = np.maximum(sample_equirect(lighting.irradiance, nrm), floor)
         size = lighting.mips[0].shape[1]
@@ -114,9 +161,10 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
             axis, cb, s2 = cap_geometry(p, nrm, c, r)
             rad = sample_cube_mips(lighting.mips, axis, mip_level_for_cap(s2, size),
                                    lighting.padded)
-            return rad * C(cb, s2)[:, None] / e_all
+            return np.where(s2[:, None] >= 1.0, 1.0, rad * C(cb, s2)[:, None] / e_all)
     else:
-        raise ValueError(f"Unknown weighting {weighting!r}: expected 'light+sh' or 'mips'.")
+        raise ValueError(f"Unknown weighting {weighting!r}: expected 'light+caps', 'light+sh' "
+                         f"or 'mips'.")
 
     part = None if hull is None else np.minimum(blocked(hull[0], hull[1]), 1.0)
     visible = combined_visibility((np.minimum(blocked(c, r), 1.0) for c, r in zip(centres, radii)),
@@ -129,8 +177,7 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
     for light in lighting.lights:
         if light.solid_angle <= 0:
             continue
-        e_light = light.radiance[None, :] * cap_cosine_integral(
-            nrm @ light.direction, cone_sin2(light.half_angle))[:, None]
+        e_light = light_irradiance(light, nrm)
         pos, rad = sun_disk(-light.direction, 2.0 * light.half_angle)
         lit = lit + e_light * sphere_visibility(p, pos, rad, centres, radii, hull)[:, None]
         total = total + e_light

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cap_filter import CAP_ANGLES, cap_filtered_maps
 from .envmap import cube_mips, equirect_to_cube, padded_mips, validate_environment
 from .irradiance import irradiance_map, irradiance_polynomial, sh9_project
 from .main_light import MAX_LIGHTS, MainLight, extract_lights
@@ -27,7 +28,9 @@ class EnvironmentLighting:
     poly           (9, 3) irradiance polynomial of the whole map (irradiance.SH_POLYNOMIAL_TERMS)
     poly_ambient   (9, 3) the same for the residual (add the main light's cap term)
     irradiance     (h, w, 3) irradiance map E(n), equirectangular (irradiance.irradiance_map)
-    mips           [(6, S, S, 3), ...] cube mip chain of the map, level 0 = CUBE_SIZE"""
+    mips           [(6, S, S, 3), ...] cube mip chain of the map, level 0 = CUBE_SIZE
+    caps           (k, h, w, 3) cap-filtered maps of the residual, one per cap half-angle
+                   of cap_filter.CAP_ANGLES (cap_filter.py)"""
 
     env: np.ndarray
     lights: list
@@ -38,6 +41,7 @@ class EnvironmentLighting:
     poly_ambient: np.ndarray
     irradiance: np.ndarray
     mips: list
+    caps: np.ndarray = None
     _padded: list = None
 
     @property
@@ -66,4 +70,5 @@ def prepare_environment(pixels, bottom_row_first=False, cube_size=CUBE_SIZE,
     return EnvironmentLighting(env=env, lights=lights, residual=residual, sh=sh, sh_ambient=sh_amb,
                                poly=irradiance_polynomial(sh),
                                poly_ambient=irradiance_polynomial(sh_amb),
-                               irradiance=irradiance_map(env), mips=mips)
+                               irradiance=irradiance_map(residual, lights=lights), mips=mips,
+                               caps=cap_filtered_maps(residual, CAP_ANGLES))

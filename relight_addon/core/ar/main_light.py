@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..texture.colour import LUMINANCE
+from .cap import cap_cosine_integral, cone_sin2
 from .envmap import equirect_directions, equirect_solid_angles
 
 
@@ -130,3 +131,11 @@ def extract_lights(env, max_lights=MAX_LIGHTS, min_share=MIN_SHARE):
         light, residual = extract_main_light(env)
         lights = [light]
     return lights, residual
+
+
+def light_irradiance(light, normals):
+    """Irradiance (n, 3) of ``light`` (a cone of its solid angle) on receivers with unit
+    ``normals`` (n, 3): its radiance times the cone's clamped-cosine integral, exact across the
+    horizon (cap.py)."""
+    return light.radiance[None, :] * cap_cosine_integral(
+        np.asarray(normals, float) @ light.direction, cone_sin2(light.half_angle))[:, None]
