@@ -93,8 +93,8 @@ def test_one_sphere_under_a_uniform_map(height):
     axis = c[0] - P
     d = np.linalg.norm(axis, axis=1)
     closed = 1 - cap_cosine_integral(axis[:, 2] / d, (r[0] / d) ** 2) / np.pi
-    # (up to the SH quadrature of a 32 x 64 map: its band 2 is ~1e-4 instead of 0)
-    np.testing.assert_allclose(F, np.repeat(closed[:, None], 3, 1), atol=5e-4)
+    # (up to the midpoint rule of the irradiance table over a 32 x 64 map: ~1e-3 of pi)
+    np.testing.assert_allclose(F, np.repeat(closed[:, None], 3, 1), atol=1.5e-3)
     traced = T.traced_shadow_factor(T.SphereOccluder(c, r), P, UP, lit.env, rays=1024, seed=3)
     assert np.abs(F[:, 1] - traced).mean() < 0.006
     seed = env_shadow_factor(P, N, c, r, lit, cap="seed")[:, 1]

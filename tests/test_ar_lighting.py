@@ -210,7 +210,7 @@ def test_irradiance_on_every_bundled_hdri(maps, name):
     for lt in lights:
         split = split + lt.radiance * cap_cosine_integral(
             n @ lt.direction, cone_sin2(lt.half_angle))[:, None]
-    imap = rel(E.sample_equirect(I.irradiance_map(res, lights=lights), n))
+    imap = rel(E.sample_nodes(I.irradiance_map(res, lights=lights), n))
     assert imap < 0.01
     assert sh < 0.25 and rel(split) < 0.06
     if name in ("city", "sunrise"):                      # a sun: the split helps

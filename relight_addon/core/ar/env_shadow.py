@@ -40,7 +40,7 @@ from ..relight.sphere_shadow import combined_visibility, sphere_visibility, sun_
 from ..texture.colour import LUMINANCE
 from .cap import cap_cosine_integral, seed_cap_cosine_integral
 from .cap_filter import sample_cap_filtered
-from .envmap import sample_cube_mips, sample_equirect
+from .envmap import sample_cube_mips, sample_nodes
 from .irradiance import sh9_basis
 from .main_light import light_irradiance
 
@@ -137,7 +137,7 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
 
     if weighting in ("light+caps", "light+sh"):
         # the residual's irradiance: the exact one (irradiance map) less the lights' own
-        e_amb = sample_equirect(lighting.irradiance, nrm)
+        e_amb = sample_nodes(lighting.irradiance, nrm)
         for light in lighting.lights:
             e_amb = e_amb - light_irradiance(light, nrm)
         e_amb = np.maximum(e_amb, floor)
@@ -154,7 +154,7 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
             b = rad * C(cb, s2)[:, None] / e_amb
             return np.where(s2[:, None] >= 1.0, 1.0, b)       # inside the sphere: all hidden
     elif weighting == "mips":
-        e_all = np.maximum(sample_equirect(lighting.irradiance, nrm), floor)
+        e_all = np.maximum(sample_nodes(lighting.irradiance, nrm), floor)
         size = lighting.mips[0].shape[1]
 
         def blocked(c, r):
@@ -187,5 +187,5 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
 def luminance_factor(points, normals, factor, lighting):
     """Luminance shadow factor (n,) from the RGB ``factor`` (n, 3), weighted by the map's RGB
     irradiance at each normal (what a grey receiver's photo is darkened by)."""
-    e = sample_equirect(lighting.irradiance, np.asarray(normals, float)) * LUMINANCE
+    e = sample_nodes(lighting.irradiance, np.asarray(normals, float)) * LUMINANCE
     return (factor * e).sum(-1) / np.maximum(e.sum(-1), 1e-300)

@@ -320,3 +320,41 @@ def sample_cube_mips(mips, d, level, padded=None):
 def padded_mips(mips):
     """The ``_padded`` faces of every level, for repeated :func:`sample_cube_mips` calls."""
     return [_padded(m) for m in mips]
+
+
+# ------------------------------------------------------------------------------------------
+# latitude-node tables (the small maps of E(n) and cap means)
+# ------------------------------------------------------------------------------------------
+#
+# A table of a smooth function of direction is sampled at normals and cap axes, and those are
+# very often exactly vertical (floors, table tops, a sphere overhead), where an equirectangular
+# map's longitude is undefined and its top row lies half a pixel below the pole.  So the
+# tables keep their rows on latitude *nodes*: row 0 at the zenith, row h - 1 at the nadir (each
+# pole row holds one value repeated), columns cell-centred as usual.  A GL texture reads them
+# with t = (0.5 + v (h - 1)) / h (the shader's relight_node_uv).
+
+def node_directions(h, w):
+    """(h, w, 3) unit directions of a latitude-node table, row 0 at the zenith."""
+    u = (np.arange(w) + 0.5) / w
+    v = 1.0 - np.arange(h) / (h - 1.0)
+    U, V = np.meshgrid(u, v)
+    return equirect_to_direction(U, V)
+
+
+def sample_nodes(table, d):
+    """Bilinear values (..., C) of the latitude-node table (h, w, C) in directions ``d``."""
+    h, w = table.shape[:2]
+    u, v = direction_to_equirect(d)
+    x = u * w - 0.5
+    y = (1.0 - v) * (h - 1.0)
+    x0 = np.floor(x)
+    y0 = np.clip(np.floor(y), 0, h - 2)
+    fx = (x - x0)[..., None]
+    fy = np.clip(y - y0, 0.0, 1.0)[..., None]
+    x0 = x0.astype(np.int64) % w
+    x1 = (x0 + 1) % w
+    y0 = y0.astype(np.int64)
+    y1 = y0 + 1
+    top = table[y0, x0] * (1 - fx) + table[y0, x1] * fx
+    bot = table[y1, x0] * (1 - fx) + table[y1, x1] * fx
+    return top * (1 - fy) + bot * fy

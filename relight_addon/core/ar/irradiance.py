@@ -188,18 +188,18 @@ def face_irradiance(cube_or_mips, n, level_size=1, weights="exact"):
 # irradiance map
 # ------------------------------------------------------------------------------------------
 
-IRRADIANCE_MAP_SIZE = (32, 64)      # (H, W): E(n) is smooth; bilinear error < 0.1 % here
+IRRADIANCE_MAP_SIZE = (33, 64)      # (H, W) latitude nodes every 5.6 deg: E(n) is smooth
 IRRADIANCE_SOURCE = (64, 128)       # the map is averaged down to this before the sum (2.8 deg)
 
 
 def irradiance_map(env, size=IRRADIANCE_MAP_SIZE, source=IRRADIANCE_SOURCE, chunk=512,
                    lights=()):
-    """(h, w, 3) equirectangular map of the irradiance E(n) (same layout as the environment:
-    top row first, pixel (i, j) = the normal in the direction of that pixel's centre), by
-    summing every pixel of ``env`` averaged down to ``source`` (exact solid angles).  Sampled
-    with the normal as direction (:func:`envmap.sample_equirect`, or an Environment Texture
-    node fed the normal) it gives E(n) within the interpolation's error: the accurate
-    alternative to SH9 where a map's irradiance has more than bands 0-2.  With ``lights``
+    """(h, w, 3) latitude-node table of the irradiance E(n) (envmap.node_directions: row 0 at
+    the zenith, row h - 1 at the nadir), by summing every pixel of ``env`` averaged down to
+    ``source`` (exact solid angles).  Sampled with the normal as direction
+    (:func:`envmap.sample_nodes`; a GL texture with t = (0.5 + v (h - 1)) / h) it gives E(n)
+    within the interpolation's error: the accurate alternative to SH9 where a map's
+    irradiance has more than bands 0-2.  With ``lights``
     (main_light.extract_lights) ``env`` is their residual: the lights are added exactly by
     their cap formula, so a sun is not smeared by the averaging down."""
     from .main_light import light_irradiance
@@ -211,7 +211,8 @@ def irradiance_map(env, size=IRRADIANCE_MAP_SIZE, source=IRRADIANCE_SOURCE, chun
         h, w = sh, sw
     d = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)
     lw = (env * equirect_solid_angles(h, w)[:, None, None]).reshape(-1, 3)
-    n = equirect_directions(*size).reshape(-1, 3).astype(np.float32)
+    from .envmap import node_directions
+    n = node_directions(*size).reshape(-1, 3).astype(np.float32)
     out = np.empty((len(n), 3))
     for a in range(0, len(n), chunk):
         out[a:a + chunk] = np.maximum(n[a:a + chunk] @ d.T, 0.0).astype(np.float64) @ lw

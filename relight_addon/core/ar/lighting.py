@@ -27,9 +27,9 @@ class EnvironmentLighting:
     sh_ambient     (9, 3) radiance SH9 of the residual
     poly           (9, 3) irradiance polynomial of the whole map (irradiance.SH_POLYNOMIAL_TERMS)
     poly_ambient   (9, 3) the same for the residual (add the main light's cap term)
-    irradiance     (h, w, 3) irradiance map E(n), equirectangular (irradiance.irradiance_map)
+    irradiance     (h, w, 3) irradiance table E(n), latitude nodes (irradiance.irradiance_map)
     mips           [(6, S, S, 3), ...] cube mip chain of the map, level 0 = CUBE_SIZE
-    caps           (k, h, w, 3) cap-filtered maps of the residual, one per cap half-angle
+    caps           (k, h, w, 3) cap-filtered tables (latitude nodes) of the residual, one per cap half-angle
                    of cap_filter.CAP_ANGLES (cap_filter.py)"""
 
     env: np.ndarray
