@@ -284,7 +284,8 @@ def write_md(irr, shadows, ao, glossy, args, path):
     L.append("## 2. Sphere shadows under an environment\n")
     L.append(f"Shadow factor F = irradiance past the occluder / unoccluded irradiance "
              f"(luminance) on receivers {args.cells} cells a side: *ground* (3.2 x 3.2 m), "
-             "*table* (a 1.2 x 0.8 m top the object stands on: contact shadows, finer cells), "
+             "*table* (a 1.2 x 0.8 m top under the object, finer cells: the chair and the torus "
+             "stand on it, contact shadows), "
              "*corner* (floor + two walls facing +x and +y, 15 cm from the object's box).  "
              "Objects: " + ", ".join(S.OBJECTS) + " (tests/ar_scenes.py: a 0.3 m sphere 5 cm up, "
              "Suzanne 5 cm up, a chair with 3 cm legs, a torus lying on the floor).  "

@@ -3,9 +3,10 @@
 Objects, in world coordinates, resting on z = 0 unless said: a sphere (0.3 m, 5 cm above the
 floor), Suzanne (tests/data/ar_suzanne.npz: bpy's primitive_monkey_add(size=1) exported once,
 smart-project UVs), a chair with thin legs (3 cm legs), a torus lying on the floor.  Receivers:
-a ground plane, a table top (a 1.2 x 0.8 m rectangle at z = 0; only the object occludes, so
-the object stands on it: contact shadows), a corner of two walls (the floor plus walls x = -X0
-and y = -Y0, facing +x and +y).
+a ground plane (3.2 x 3.2 m), a table top (a 1.2 x 0.8 m rectangle at z = 0 under the object:
+the same floor, sampled finer near the object, where the chair and the torus stand on it and
+cast contact shadows; only the object occludes), a corner of two walls (the floor plus walls
+15 cm beyond the object's box, facing +x and +y).
 """
 from __future__ import annotations
 
