@@ -52,13 +52,6 @@ METHODS = {  # name: (weighting, cap, silhouette hull)
 }
 
 
-def fibonacci(n):
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    ph = np.pi * (1 + 5 ** 0.5) * k
-    return np.stack([np.sqrt(1 - z * z) * np.cos(ph), np.sqrt(1 - z * z) * np.sin(ph), z], 1)
-
-
 def timed(fn, repeat=3):
     out, times = None, []
     for _ in range(repeat):
@@ -73,7 +66,7 @@ def timed(fn, repeat=3):
 # ------------------------------------------------------------------------------------------
 
 def bench_irradiance(hdris, n_normals):
-    n = fibonacci(n_normals)
+    n = T.fibonacci(n_normals)
     rows = []
     for name, path in hdris.items():
         lit, t_prep = timed(lambda: prepare_environment(T.load_exr(path)), 1)

@@ -34,6 +34,14 @@ def load_exr(path):
     return img[..., 2::-1].astype(np.float64)
 
 
+def fibonacci(n):
+    """(n, 3) unit vectors of a Fibonacci lattice: nearly uniform normals."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    ph = np.pi * (1 + 5 ** 0.5) * k
+    return np.stack([np.sqrt(1 - z * z) * np.cos(ph), np.sqrt(1 - z * z) * np.sin(ph), z], 1)
+
+
 def pixel_directions(h, w):
     """(h, w, 3) unit directions of the pixel centres, Blender's equirect convention, top row
     first (written here again, independently of core.ar.envmap)."""

@@ -20,13 +20,6 @@ HDRIS = T.bundled_hdris()
 needs_hdris = pytest.mark.skipif(not HDRIS, reason="the bpy wheel's HDRIs are not installed")
 
 
-def fibonacci(n):
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    ph = np.pi * (1 + 5 ** 0.5) * k
-    return np.stack([np.sqrt(1 - z * z) * np.cos(ph), np.sqrt(1 - z * z) * np.sin(ph), z], 1)
-
-
 def random_normals(n, seed=0):
     v = np.random.default_rng(seed).normal(size=(n, 3))
     return v / np.linalg.norm(v, axis=1, keepdims=True)

@@ -123,18 +123,23 @@ def sample_equirect(env, d):
     (..., 3): wraps in longitude, clamps at the poles."""
     h, w = env.shape[:2]
     u, v = direction_to_equirect(d)
-    x = u * w - 0.5
-    y = (1.0 - v) * h - 0.5
+    return _bilinear(env, u * w - 0.5, (1.0 - v) * h - 0.5, h - 1)
+
+
+def _bilinear(table, x, y, last_row):
+    """Bilinear lookup of ``table`` (h, w, C) at column x (wrapping) and row y (clamped to
+    0 .. last_row; the upper neighbour of row last_row is itself or the next row)."""
+    h, w = table.shape[:2]
     x0 = np.floor(x)
-    y0 = np.clip(np.floor(y), 0, h - 1)
+    y0 = np.clip(np.floor(y), 0, last_row)
     fx = (x - x0)[..., None]
     fy = np.clip(y - y0, 0.0, 1.0)[..., None]
     x0 = x0.astype(np.int64) % w
     x1 = (x0 + 1) % w
     y0 = y0.astype(np.int64)
     y1 = np.minimum(y0 + 1, h - 1)
-    top = env[y0, x0] * (1 - fx) + env[y0, x1] * fx
-    bot = env[y1, x0] * (1 - fx) + env[y1, x1] * fx
+    top = table[y0, x0] * (1 - fx) + table[y0, x1] * fx
+    bot = table[y1, x0] * (1 - fx) + table[y1, x1] * fx
     return top * (1 - fy) + bot * fy
 
 
@@ -345,16 +350,4 @@ def sample_nodes(table, d):
     """Bilinear values (..., C) of the latitude-node table (h, w, C) in directions ``d``."""
     h, w = table.shape[:2]
     u, v = direction_to_equirect(d)
-    x = u * w - 0.5
-    y = (1.0 - v) * (h - 1.0)
-    x0 = np.floor(x)
-    y0 = np.clip(np.floor(y), 0, h - 2)
-    fx = (x - x0)[..., None]
-    fy = np.clip(y - y0, 0.0, 1.0)[..., None]
-    x0 = x0.astype(np.int64) % w
-    x1 = (x0 + 1) % w
-    y0 = y0.astype(np.int64)
-    y1 = y0 + 1
-    top = table[y0, x0] * (1 - fx) + table[y0, x1] * fx
-    bot = table[y1, x0] * (1 - fx) + table[y1, x1] * fx
-    return top * (1 - fy) + bot * fy
+    return _bilinear(table, u * w - 0.5, (1.0 - v) * (h - 1.0), h - 2)
