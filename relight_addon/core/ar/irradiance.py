@@ -193,16 +193,18 @@ IRRADIANCE_SOURCE = (64, 128)       # the map is averaged down to this before th
 
 
 def irradiance_map(env, size=IRRADIANCE_MAP_SIZE, source=IRRADIANCE_SOURCE, chunk=512,
-                   lights=()):
+                   sparse=None, layout="nodes"):
     """(h, w, 3) latitude-node table of the irradiance E(n) (envmap.node_directions: row 0 at
     the zenith, row h - 1 at the nadir), by summing every pixel of ``env`` averaged down to
     ``source`` (exact solid angles).  Sampled with the normal as direction
     (:func:`envmap.sample_nodes`; a GL texture with t = (0.5 + v (h - 1)) / h) it gives E(n)
     within the interpolation's error: the accurate alternative to SH9 where a map's
-    irradiance has more than bands 0-2.  With ``lights``
-    (main_light.extract_lights) ``env`` is their residual: the lights are added exactly by
-    their cap formula, so a sun is not smeared by the averaging down."""
-    from .main_light import light_irradiance
+    irradiance has more than bands 0-2.  With ``sparse``, a full-resolution map whose few
+    non-zero pixels are summed exactly (the lights of main_light.extract_lights: map -
+    residual), ``env`` is the rest (the residual): a sun is not smeared by the averaging down.  ``layout="equirect"``
+    gives an ordinary equirectangular image instead (cell-centred rows, top row first), for
+    Blender's Environment Texture node fed the normal: take size (128, 256) or more there, its
+    top row lies half a row below the zenith that floors' normals read."""
     from .envmap import resize_equirect
     h, w = env.shape[:2]
     sh, sw = source
@@ -212,10 +214,16 @@ def irradiance_map(env, size=IRRADIANCE_MAP_SIZE, source=IRRADIANCE_SOURCE, chun
     d = equirect_directions(h, w).reshape(-1, 3).astype(np.float32)
     lw = (env * equirect_solid_angles(h, w)[:, None, None]).reshape(-1, 3)
     from .envmap import node_directions
-    n = node_directions(*size).reshape(-1, 3).astype(np.float32)
+    grid = node_directions if layout == "nodes" else equirect_directions
+    n = grid(*size).reshape(-1, 3).astype(np.float32)
     out = np.empty((len(n), 3))
     for a in range(0, len(n), chunk):
         out[a:a + chunk] = np.maximum(n[a:a + chunk] @ d.T, 0.0).astype(np.float64) @ lw
-    for light in lights:
-        out += light_irradiance(light, n.astype(np.float64))
+    if sparse is not None:
+        sh, sw = sparse.shape[:2]
+        rows, cols = np.nonzero(np.any(sparse != 0, axis=2))
+        if len(rows):
+            ds = equirect_directions(sh, sw)[rows, cols]
+            ls = sparse[rows, cols] * equirect_solid_angles(sh, sw)[rows, None]
+            out += np.maximum(n.astype(np.float64) @ ds.T, 0.0) @ ls
     return out.reshape(size + (3,))

@@ -70,5 +70,5 @@ def prepare_environment(pixels, bottom_row_first=False, cube_size=CUBE_SIZE,
     return EnvironmentLighting(env=env, lights=lights, residual=residual, sh=sh, sh_ambient=sh_amb,
                                poly=irradiance_polynomial(sh),
                                poly_ambient=irradiance_polynomial(sh_amb),
-                               irradiance=irradiance_map(residual, lights=lights), mips=mips,
+                               irradiance=irradiance_map(residual, sparse=env - residual), mips=mips,
                                caps=cap_filtered_maps(residual, CAP_ANGLES))
