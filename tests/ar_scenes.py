@@ -87,7 +87,8 @@ def receivers(scene, tri, cells=40):
     points inside the object's bounding box footprint are dropped (they lie under it)."""
     lo, hi = tri.min(axis=(0, 1)), tri.max(axis=(0, 1))
     if scene == "ground":
-        planes = [(plane_points([-1.6, -1.6, 0], [3.2, 0, 0], [0, 3.2, 0], cells, cells), [0, 0, 1.0])]
+        planes = [(plane_points([-1.6, -1.6, 0], [3.2, 0, 0], [0, 3.2, 0], cells, cells),
+                   [0, 0, 1.0])]
     elif scene == "table":
         planes = [(plane_points([-0.6, -0.4, 0], [1.2, 0, 0], [0, 0.8, 0], cells, cells * 2 // 3),
                    [0, 0, 1.0])]

@@ -149,7 +149,8 @@ void main()
   bool has_hull = hull.w > 0.0;
 
   /* irradiance of the lights, and the residual's: the map's less the lights' */
-  vec3 e_amb = texture(irradiance_map, relight_node_uv(n, float(textureSize(irradiance_map, 0).y))).rgb;
+  float rows = float(textureSize(irradiance_map, 0).y);
+  vec3 e_amb = texture(irradiance_map, relight_node_uv(n, rows)).rgb;
   vec3 e_light[MAX_LIGHTS];
   for (int j = 0; j < n_lights; j++) {
     float sl = sin(min(light_dir[j].w, PI / 2.0));

@@ -17,8 +17,8 @@ eq. 17), with x = sqrt(1 / sin^2 alpha - 1) = cot alpha and y = -x cot beta:
 Seed 002 (eq. 4.3.1.3) keeps the first form everywhere, clamped at 0: at a cap centred on the
 horizon it says 0 where the truth is alpha - sin alpha cos alpha, i.e. a shadow factor wrong by
 0.12 (alpha = 50 deg), 0.23 (64 deg), 0.44 (85 deg): the case of the spheres of an object
-standing on the receiver, which dip below its plane (tests/test_ar_env_shadow.py).  A receiver inside the sphere (d <= R) sees it over
-the whole hemisphere: C = pi.
+standing on the receiver, which dip below its plane (tests/test_ar_env_shadow.py).  A receiver
+inside the sphere (d <= R) sees it over the whole hemisphere: C = pi.
 
 This module is the numpy twin of the shader's ``relight_cap_cosine`` (blender/shaders).
 """

@@ -7,7 +7,8 @@ cap (a courtyard's dark canopy overhead next to its bright opening: SH9 says a c
 overhead is 3x brighter than it is, tests/test_ar_env_shadow.py).  So the map is filtered
 once per cap half-angle of CAP_ANGLES, exactly: each output pixel the mean radiance of the
 source over the cap of that half-angle around the pixel's direction (a sum over every pixel of
-the map averaged down to CAP_SOURCE), stored as small latitude-node tables (envmap.sample_nodes); a lookup
+the map averaged down to CAP_SOURCE), stored as small latitude-node tables
+(envmap.sample_nodes); a lookup
 interpolates linearly in the half-angle between the two nearest tables (bilinear in each).
 Caps smaller than the first angle read the first table (the main lights, the sharp part, are
 taken out of the map before: main_light.py).

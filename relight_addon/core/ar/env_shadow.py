@@ -10,22 +10,26 @@ the virtual object hide part of it; the shadow factor the photograph is multipli
 Seed 002 (eq. 4.3.1.4) takes, per sphere, F = 1 - cos(w) sin^2(a) L(S) / L(H): the sphere's
 cosine-weighted solid angle (wrong once the sphere straddles the horizon, cap.py) times the
 ratio of the map's radiance over the sphere's cap to its mean over the hemisphere, both read from
-the mip chain.  Two weightings are offered here (``weighting``):
+the mip chain.  Three weightings are offered here (``weighting``):
 
-``"light+sh"`` (default; ARCore's split): the map is its main light (and up to three further
-    compact lights) plus a residual (main_light.extract_lights).  The residual's part hidden by sphere i is
-    b_i = L_res(cap_i) C(beta_i, alpha_i) / E_res(n), C the exact clamped-cosine integral of the
-    cap (cap.py) and L_res(cap) the residual's mean radiance over the cap from its SH9 (the
-    zonal cap filter: exact for the band-limited residual).  The main light, a cone of the
-    light's solid angle, is a lamp: its visible fraction V past the spheres is
+``"light+caps"`` (default): the map is its main light (and up to three further compact lights)
+    plus a residual (main_light.extract_lights, ARCore's split).  The residual's part hidden by
+    sphere i is b_i = L_res(cap_i) C(beta_i, alpha_i) / E_res(n): C the exact clamped-cosine
+    integral of the cap (cap.py), E_res the residual's irradiance (the irradiance table less
+    the lights'), L_res(cap) the residual's mean radiance over the part of the cap above the
+    receiver's horizon (:func:`visible_cap`), read from the cap-filtered tables (cap_filter.py)
+    at that cap's cosine-weighted centroid (:func:`cosine_centroid`).  Each light, a cone of its
+    solid angle, is a lamp: its visible fraction V past the spheres is
     relight.sphere_shadow.sphere_visibility (the lamps' own formula: one implementation), its
     irradiance E_L = L_light C(beta_L, theta_L).  F = (E_res (1 - B) + sum E_L V) / (E_res +
-    sum E_L), summed over the lights.
+    sum E_L).
+``"light+sh"``: the same with L_res(cap) from the residual's SH9 (the zonal cap filter, exact
+    for a band-limited residual; wrong by x3 under a courtyard's dark canopy).
 ``"mips"`` (the seed's L(S) / L(H)): b_i = L_mip(cap_i) C_i / E(n), L_mip the cube mip chain
     read in the cap's direction at the level whose texels have the cap's solid angle, E(n) the
-    map's exact irradiance (the irradiance map).  F = 1 - B.
+    map's irradiance (the table).  F = 1 - B.
 
-Either way the b_i of a set combine within the object's silhouette
+Every way, the b_i of a set combine within the object's silhouette
 (sphere_shadow.combined_visibility with the hull sphere's b: one rule for lamps and maps).
 ``cap="seed"`` swaps the exact C for the seed's pi cos(beta) sin^2(alpha).  Positions are world
 coordinates (the map's directions are world-fixed): move a set with :func:`world_spheres`.
@@ -123,8 +127,9 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
     """Shadow factor (n, 3) in [0, 1] of receivers ``points`` (n, 3) with unit ``normals``
     (n, 3) under ``lighting`` (lighting.EnvironmentLighting), from the spheres ``centres``
     (m, 3), ``radii`` (m,) and the optional ``hull`` = (centre, radius) silhouette sphere
-    (relight.spheres.silhouette_sphere), all in world coordinates.  ``weighting``: "light+sh"
-    (default) or "mips" (seed 002); ``cap``: "exact" (default) or "seed".  1 where nothing is
+    (relight.spheres.silhouette_sphere), all in world coordinates.  ``weighting``:
+    "light+caps" (default), "light+sh" or "mips" (seed 002); ``cap``: "exact" (default) or
+    "seed".  1 where nothing is
     hidden; never NaN."""
     p = np.asarray(points, float)
     nrm = np.asarray(normals, float)

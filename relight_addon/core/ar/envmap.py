@@ -254,7 +254,8 @@ def sample_cube(cube, d, padded=None):
 
 def equirect_to_cube(env, size=None):
     """(6, size, size, 3) cube faces of the equirectangular map: each texel the solid-angle
-    mean of k^2 bilinear lookups over it (k = the source pixels per texel side, 2..SUPERSAMPLE).  ``size`` defaults to the power of two
+    mean of k^2 bilinear lookups over it (k = the source pixels per texel side,
+    2..SUPERSAMPLE).  ``size`` defaults to the power of two
     nearest W / 4 (the same pixel density at the equator)."""
     if size is None:
         size = 1 << max(0, int(round(np.log2(max(env.shape[1] / 4.0, 1.0)))))

@@ -201,7 +201,8 @@ def irradiance_map(env, size=IRRADIANCE_MAP_SIZE, source=IRRADIANCE_SOURCE, chun
     within the interpolation's error: the accurate alternative to SH9 where a map's
     irradiance has more than bands 0-2.  With ``sparse``, a full-resolution map whose few
     non-zero pixels are summed exactly (the lights of main_light.extract_lights: map -
-    residual), ``env`` is the rest (the residual): a sun is not smeared by the averaging down.  ``layout="equirect"``
+    residual), ``env`` is the rest (the residual): a sun is not smeared by the averaging
+    down.  ``layout="equirect"``
     gives an ordinary equirectangular image instead (cell-centred rows, top row first), for
     Blender's Environment Texture node fed the normal: take size (128, 256) or more there, its
     top row lies half a row below the zenith that floors' normals read."""

@@ -26,11 +26,12 @@ class EnvironmentLighting:
     sh             (9, 3) radiance SH9 of the whole map (irradiance.py order)
     sh_ambient     (9, 3) radiance SH9 of the residual
     poly           (9, 3) irradiance polynomial of the whole map (irradiance.SH_POLYNOMIAL_TERMS)
-    poly_ambient   (9, 3) the same for the residual (add the main light's cap term)
+    poly_ambient   (9, 3) the same for the residual (add main_light.light_irradiance of each
+                   light)
     irradiance     (h, w, 3) irradiance table E(n), latitude nodes (irradiance.irradiance_map)
     mips           [(6, S, S, 3), ...] cube mip chain of the map, level 0 = CUBE_SIZE
-    caps           (k, h, w, 3) cap-filtered tables (latitude nodes) of the residual, one per cap half-angle
-                   of cap_filter.CAP_ANGLES (cap_filter.py)"""
+    caps           (k, h, w, 3) cap-filtered tables (latitude nodes) of the residual, one
+                   per cap half-angle of cap_filter.CAP_ANGLES (cap_filter.py)"""
 
     env: np.ndarray
     lights: list
@@ -70,5 +71,6 @@ def prepare_environment(pixels, bottom_row_first=False, cube_size=CUBE_SIZE,
     return EnvironmentLighting(env=env, lights=lights, residual=residual, sh=sh, sh_ambient=sh_amb,
                                poly=irradiance_polynomial(sh),
                                poly_ambient=irradiance_polynomial(sh_amb),
-                               irradiance=irradiance_map(residual, sparse=env - residual), mips=mips,
+                               irradiance=irradiance_map(residual, sparse=env - residual),
+                               mips=mips,
                                caps=cap_filtered_maps(residual, CAP_ANGLES))
