@@ -676,7 +676,10 @@ class _Reader:
                                     "power_photo": 0.0 if is_virtual else power,
                                     "power_ref": power_ref,
                                     "uid": None if record is None else record["uid"],
-                                    "color0": [float(c) for c in light.color]})
+                                    "color0": [float(c) for c in light.color],
+                                    "exposure": float(getattr(light, "exposure", 0.0)),
+                                    "temperature": float(light.temperature) if getattr(
+                                        light, "use_temperature", False) else 0.0})
         report.lamps += 1
         if not patches:
             light_rows.append(_analytic_light(light, matrix, k, power_ref))
