@@ -252,7 +252,10 @@ def _decide(scene, job, st):
     new = job.parts
     if not old or st.get("preset") != job.preset or st.get("correction") != job.correction:
         return
-    kept = state.last_result(scene)
+    # (the kept solution is read only where a path starts from it: after reopening, an Update
+    # that changes nothing reads nothing)
+    def kept():
+        return state.last_result(scene)
     virtual = {r["label"] for r in job.records if r.get("virtual")}
     real = {r["label"] for r in job.records if not r.get("virtual")}
     present = set(new["lamps"])
@@ -261,9 +264,10 @@ def _decide(scene, job, st):
     if new["geometry"] != old.get("geometry") or moved_real:
         return                                          # a new solve
     if new["surfaces"] != old.get("surfaces"):
-        if kept is not None and kept.options.mode != "element" and \
-                kept.options.proxy_faces == job.proxy_faces and not set(real) - present:
-            job.action, job.reuse = "reuse", kept.solution
+        result = kept()
+        if result is not None and result.options.mode != "element" and \
+                result.options.proxy_faces == job.proxy_faces and not set(real) - present:
+            job.action, job.reuse = "reuse", result.solution
         return
     new_virtual = {n for n in present if n not in real}
     changed = {n for n in new_virtual if new["lamps"][n] != old_lamps.get(n)}
@@ -275,22 +279,24 @@ def _decide(scene, job, st):
         return
     gone = sorted(real - present)
     if changed or removed or objects:
-        room = None if kept is None else (kept.room if kept.room is not None else
-                                          (None if st.get("objects") else kept))
+        result = kept()
+        room = None if result is None else (result.room if result.room is not None else
+                                            (None if st.get("objects") else result))
         if room is None or room.denominator is None:
             # nothing kept to start from: solve, and say why
             job.note = state.kept_problem(scene) or (
                 "no solution of the last run is kept (the file was saved without it: add-on "
-                "preferences)" if kept is None else "")
+                "preferences)" if result is None else "")
             return
         job.action, job.base = "quick", room
         job.drop = sorted((changed | removed) & virtual)
         job.add = sorted(changed)
         return
     if gone != sorted(st.get("gone", ())) or not write.has_relight_data(scene):
-        if kept is None:
+        result = kept()
+        if result is None:
             return
-        job.action, job.base = "rewrite", kept
+        job.action, job.base = "rewrite", result
         return
     job.action = "reapply" if st.get("restored") or not materials.relit_slot_count(scene) \
         else "none"
@@ -398,7 +404,9 @@ def finish(context, job, result) -> Outcome:
         shown = materials.reapply(scene) if job.action == "reapply" else 0
         if shown:
             state.update_status(scene, restored=False)
-        moving = sync_spheres(context, report, state.last_result(scene))
+        from .roles import moving_objects
+        moving = sync_spheres(context, report, state.last_result(
+            scene, load=bool(moving_objects(scene))))       # (settling traces with it)
         warnings = list(report.warnings)
         if shown:
             message = f"Relight: {shown} material slot(s) show the relit materials again"
