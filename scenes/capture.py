@@ -1,0 +1,357 @@
+"""Renders with known cameras for the capture tests and benchmark (bpy, Cycles).
+
+* ``render_board_views(spec, views, samples, name)``: a ChArUco board (the PNG the add-on
+  writes, on an emission-only plane of the board's size W x H centred at the world origin,
+  printed face +Z, image top +Y) photographed by Blender cameras of known intrinsics and
+  poses; 8-bit grey PNGs (Standard view transform: the board's white is 255, its black 0, the
+  grey world 188).  Returns the paths and the truth: each camera's matrix_world and its K
+  derived from Blender's own projection matrix (``Object.calc_matrix_camera``), not from the
+  add-on's formula.
+* ``look_at``, ``orbit_views``: camera matrices looking at the board.
+* ``distort``: a known OpenCV distortion applied to a rendered image (after rendering).
+
+Cycles, not Workbench: Workbench's corners are offset by about (+0.04, -0.11) px (measured on
+a 640 x 480 board; its texture sampling is not the issue: the offset is the same for 50-400
+texels a square and for Linear or Closest), Cycles' are unbiased (mean offset < 0.01 px, RMS
+0.025 px at 64 samples, 0.06 px at 16).
+
+Cache: ``<RELIGHT_BAKE_CACHE or .cache/bakes>/capture/<key>/`` with key = sha256 of (this
+harness's version, the board, the views, samples, seed, bpy version); ``truth.json`` beside
+the images.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+
+import numpy as np
+
+from scenes.bake import default_cache_dir
+
+VERSION = "relight-capture-render-v2"
+TEXELS_PER_SQUARE = 128      # board texture resolution (the render's squares are 20-100 px)
+BACKGROUND = 0.5             # linear grey of the world behind the board
+
+
+def cache_dir() -> str:
+    return os.path.join(default_cache_dir(), "capture")
+
+
+def _bpy():
+    import bpy  # noqa: PLC0415
+    return bpy
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0), roll_deg=0.0) -> np.ndarray:
+    """Blender camera matrix_world at ``eye`` looking at ``target`` (-Z forward, +Y up),
+    rolled about its view axis."""
+    eye, target, up = (np.asarray(x, np.float64) for x in (eye, target, up))
+    back = eye - target
+    back /= np.linalg.norm(back)
+    if abs(np.dot(back, up)) > 0.999:
+        up = np.array([0.0, 1.0, 0.0])
+    x = np.cross(up, back)
+    x /= np.linalg.norm(x)
+    y = np.cross(back, x)
+    r = np.radians(roll_deg)
+    xr = np.cos(r) * x + np.sin(r) * y
+    yr = -np.sin(r) * x + np.cos(r) * y
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = xr, yr, back, eye
+    return m
+
+
+def orbit_views(n, board_size, camera: dict, seed=0, tilt_deg=(15.0, 50.0), fill=(0.55, 0.9),
+                distance=None, jitter=0.3):
+    """``n`` views of a board at the origin: directions tilted ``tilt_deg`` (uniform) from its
+    normal at any azimuth, distance so that the board's width fills a ``fill`` fraction of the
+    frame's width (or a fixed ``distance``), aim jittered by ``jitter`` of the board's size,
+    roll +-25 degrees.  ``camera`` holds the intrinsics (lens, sensor_width, shift_x, shift_y,
+    width, height) copied into every view."""
+    rng = np.random.default_rng(seed)
+    w, h = board_size
+    fov = 2 * np.arctan(0.5 * camera.get("sensor_width", 36.0) / camera["lens"])
+    views = []
+    for i in range(n):
+        tilt = np.radians(rng.uniform(*tilt_deg))
+        az = rng.uniform(0, 2 * np.pi)
+        d = np.array([np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.cos(tilt)])
+        if distance is None:
+            dist = w / rng.uniform(*fill) / (2 * np.tan(fov / 2))
+        else:
+            dist = float(distance)
+        aim = np.array([rng.uniform(-jitter, jitter) * w, rng.uniform(-jitter, jitter) * h, 0.0])
+        m = look_at(aim + dist * d, aim, roll_deg=rng.uniform(-25, 25))
+        views.append(dict(camera, matrix_world=m.tolist()))
+    return views
+
+
+def blender_K(cam_obj, scene) -> np.ndarray:
+    """K from Blender's own projection matrix (OpenGL clip space -> OpenCV pixels)."""
+    r = scene.render
+    w = int(r.resolution_x * r.resolution_percentage / 100)
+    h = int(r.resolution_y * r.resolution_percentage / 100)
+    dg = _bpy().context.evaluated_depsgraph_get()
+    p = np.array(cam_obj.calc_matrix_camera(dg, x=w, y=h, scale_x=r.pixel_aspect_x,
+                                            scale_y=r.pixel_aspect_y))
+    # x_ndc = (p00 X + p02 Z) / -Z with Z < 0 in front: u = (x_ndc + 1) w / 2 - 0.5;
+    # OpenCV (x, y, z) = (X, -Y, -Z), v from the top = (1 - y_ndc) h / 2 - 0.5
+    fx = p[0, 0] * w / 2
+    fy = p[1, 1] * h / 2
+    cx = (1 - p[0, 2]) * w / 2 - 0.5
+    cy = (1 + p[1, 2]) * h / 2 - 0.5
+    return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
+
+
+def _key(spec, views, samples, seed, extra):
+    bpy = _bpy()
+    h = hashlib.sha256()
+    h.update(repr((VERSION, tuple(bpy.app.version), spec.squares_x, spec.squares_y,
+                   spec.square_length, spec.marker_length, spec.dictionary, samples, seed,
+                   TEXELS_PER_SQUARE, BACKGROUND, extra)).encode())
+    h.update(json.dumps(views, sort_keys=True).encode())
+    return h.hexdigest()[:32]
+
+
+def board_scene(spec, background=BACKGROUND):
+    """A factory-empty scene with the board plane "Board" (emission, its PNG as texture)."""
+    bpy = _bpy()
+    from relight_addon.core.capture.board import board_image  # noqa: PLC0415
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    w, h = spec.size
+    me = bpy.data.meshes.new("Board")
+    me.from_pydata([(-w / 2, -h / 2, 0), (w / 2, -h / 2, 0), (w / 2, h / 2, 0), (-w / 2, h / 2, 0)],
+                   [], [(0, 1, 2, 3)])
+    uv = me.uv_layers.new(name="UVMap")
+    uv.data.foreach_set("uv", [0, 0, 1, 0, 1, 1, 0, 1])
+    obj = bpy.data.objects.new("Board", me)
+    scene.collection.objects.link(obj)
+    pix = board_image(spec, TEXELS_PER_SQUARE)[::-1].astype(np.float32) / 255.0  # row 0 = bottom
+    img = bpy.data.images.new("BoardTexture", pix.shape[1], pix.shape[0], alpha=False)
+    rgba = np.ones(pix.shape + (4,), np.float32)
+    rgba[..., :3] = pix[..., None]
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()
+    mat = bpy.data.materials.new("Board")
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Linear"
+    nt.links.new(tex.outputs["Color"], em.inputs["Color"])
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    me.materials.append(mat)
+    world = bpy.data.worlds.new("World")
+    world.color = (background,) * 3
+    if world.node_tree is None:              # Blender before 5.0: no node tree by default
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (background,) * 3 + (1.0,)
+    scene.world = world
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    return scene, obj, cam
+
+
+def apply_camera(cam, scene, view: dict):
+    c = cam.data
+    c.lens = view["lens"]
+    c.sensor_width = view.get("sensor_width", 36.0)
+    c.sensor_height = view.get("sensor_height", 24.0)
+    c.sensor_fit = view.get("sensor_fit", "AUTO")
+    c.shift_x = view.get("shift_x", 0.0)
+    c.shift_y = view.get("shift_y", 0.0)
+    c.clip_start = 0.01
+    c.clip_end = 100.0
+    r = scene.render
+    r.resolution_x, r.resolution_y = view["width"], view["height"]
+    r.resolution_percentage = 100
+    r.pixel_aspect_x = view.get("pixel_aspect_x", 1.0)
+    r.pixel_aspect_y = view.get("pixel_aspect_y", 1.0)
+    import mathutils  # noqa: PLC0415
+    # (a plain list of rows would be read as columns)
+    cam.matrix_world = mathutils.Matrix(np.asarray(view["matrix_world"], np.float64).tolist())
+    _bpy().context.view_layer.update()
+
+
+def _cycles(scene, samples, seed):
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device = "CPU"
+    cy.samples = int(samples)
+    cy.seed = int(seed)
+    cy.use_adaptive_sampling = False
+    cy.use_denoising = False
+    cy.max_bounces = 0
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "BW"
+    scene.render.image_settings.color_depth = "8"
+
+
+def render_board_views(spec, views, samples=16, seed=0, name="views", use_cache=True) -> dict:
+    """Render (or read from the cache) one PNG per view.  Returns {"paths": [...], "K": [3x3],
+    "matrix_world": [4x4], "board_matrix_world": 4x4, "seconds": render time (cold)}."""
+    key = _key(spec, views, samples, seed, name)
+    folder = os.path.join(cache_dir(), key)
+    truth_path = os.path.join(folder, "truth.json")
+    if use_cache and os.path.exists(truth_path):
+        with open(truth_path) as fh:
+            truth = json.load(fh)
+        paths = [os.path.join(folder, p) for p in truth["files"]]
+        if all(os.path.exists(p) for p in paths):
+            truth["paths"] = paths
+            truth["cached"] = True
+            return truth
+    bpy = _bpy()
+    os.makedirs(folder, exist_ok=True)
+    scene, board, cam = board_scene(spec)
+    _cycles(scene, samples, seed)
+    files, ks, mws = [], [], []
+    t0 = time.perf_counter()
+    for i, view in enumerate(views):
+        apply_camera(cam, scene, view)
+        fname = f"{name}_{i:03d}.png"
+        scene.render.filepath = os.path.join(folder, fname)
+        bpy.ops.render.render(write_still=True)
+        files.append(fname)
+        ks.append(blender_K(cam, scene).tolist())
+        mws.append(np.array(cam.matrix_world).tolist())
+    truth = {"files": files, "K": ks, "matrix_world": mws,
+             "board_matrix_world": np.array(board.matrix_world).tolist(),
+             "seconds": time.perf_counter() - t0, "samples": samples}
+    tmp = truth_path + f".{os.getpid()}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(truth, fh)
+    os.replace(tmp, truth_path)
+    truth["paths"] = [os.path.join(folder, f) for f in files]
+    truth["cached"] = False
+    return truth
+
+
+def distort(image, K, dist, fill=None) -> np.ndarray:
+    """What a lens with OpenCV distortion ``dist`` and matrix K would have imaged: every
+    output (distorted) pixel samples the undistorted render at its undistorted position
+    (cv2.undistortPointsIter, converged to 1e-10 px), bilinearly; pixels that fall outside
+    the render get ``fill`` (default: the background grey)."""
+    import cv2  # noqa: PLC0415
+    h, w = image.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    pts = np.stack([xx.ravel(), yy.ravel()], 1).reshape(-1, 1, 2)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    und = cv2.undistortPointsIter(pts, K, np.asarray(dist, np.float64), None, K, crit)
+    mx = und[:, 0, 0].reshape(h, w).astype(np.float32)
+    my = und[:, 0, 1].reshape(h, w).astype(np.float32)
+    if fill is None:
+        fill = int(round(255 * _srgb(BACKGROUND)))
+    return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=fill)
+
+
+def _srgb(x):
+    return 12.92 * x if x <= 0.0031308 else 1.055 * x ** (1 / 2.4) - 0.055
+
+
+def warp_board_view(spec, K, T_cv_board, size, pixels_per_square=96, supersample=4,
+                    background=None):
+    """A distortion-free photo of the board without Blender: the board image mapped by the
+    homography ``K [r1 r2 t]`` of the pose ``T_cv_board`` (board -> OpenCV camera, 4x4) onto a
+    ``supersample``-times larger canvas (bilinear), then box-filtered down (INTER_AREA) to
+    ``size`` (w, h).  uint8 grey; the background is the renders' grey."""
+    import cv2  # noqa: PLC0415
+    from relight_addon.core.capture.board import board_image  # noqa: PLC0415
+    p, s = int(pixels_per_square), int(supersample)
+    img = board_image(spec, p)
+    sq = spec.square_length
+    # board image pixel centres -> board metres
+    A = np.array([[sq / p, 0, 0.5 * sq / p], [0, sq / p, 0.5 * sq / p], [0, 0, 1]])
+    T = np.asarray(T_cv_board, np.float64)
+    Rt = np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]])
+    # final OpenCV pixel coordinates -> supersampled canvas coordinates
+    B = np.array([[s, 0, 0.5 * s - 0.5], [0, s, 0.5 * s - 0.5], [0, 0, 1]])
+    H = B @ np.asarray(K, np.float64) @ Rt @ A
+    if background is None:
+        background = int(round(255 * _srgb(BACKGROUND)))
+    big = cv2.warpPerspective(img, H, (size[0] * s, size[1] * s), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=int(background))
+    return cv2.resize(big, (size[0], size[1]), interpolation=cv2.INTER_AREA)
+
+
+def cv_pose(camera_world, board_frame_world) -> np.ndarray:
+    """T_cv_board (board -> OpenCV camera) from a Blender camera matrix_world and the board
+    frame's world matrix (the truth side of the tests: written out, not the add-on's)."""
+    cam = np.asarray(camera_world, np.float64) @ np.diag([1.0, -1.0, -1.0, 1.0])
+    return np.linalg.inv(cam) @ np.asarray(board_frame_world, np.float64)
+
+
+def board_frame_world(board_matrix_world, board_size) -> np.ndarray:
+    """World matrix of the board's OpenCV frame for a W x H plane centred on its origin
+    (the issue's contract: plane-local (-W/2, +H/2, 0), X = +X, Y = -Y, Z = -Z)."""
+    w, h = board_size
+    local = np.array([[1.0, 0, 0, -w / 2], [0, -1.0, 0, h / 2], [0, 0, -1.0, 0], [0, 0, 0, 1]])
+    return np.asarray(board_matrix_world, np.float64) @ local
+
+
+# ------------------------------------------------------------------------------------------
+# The render sets of the tests and the benchmark
+# ------------------------------------------------------------------------------------------
+
+CALIBRATION_BOARD = dict(squares_x=9, squares_y=6, square_length=0.04, marker_length=0.03)
+# camera models: 640 x 480 on a 36 mm sensor; B and C off-centre through the shift
+CALIBRATION_MODELS = {
+    "A": dict(lens=24.0, shift_x=0.0, shift_y=0.0),
+    "B": dict(lens=40.0, shift_x=0.05, shift_y=-0.04),
+    "C": dict(lens=60.0, shift_x=-0.03, shift_y=0.025),
+}
+# model D: model A's renders with this radial distortion applied after rendering
+DISTORTION = (-0.12, 0.03, 0.0, 0.0, 0.0)
+CALIBRATION_VIEWS = 24
+POSE_BOARD = dict(squares_x=7, squares_y=5, square_length=0.12, marker_length=0.09)
+POSE_CAMERA = dict(lens=35.0, sensor_width=36.0, width=1280, height=960)
+POSE_DISTANCES = (1.0, 2.0, 3.0)
+POSE_VIEWS = 4
+
+
+def board_spec(args):
+    from relight_addon.core.capture.board import BoardSpec  # noqa: PLC0415
+    return BoardSpec(args["squares_x"], args["squares_y"], args["square_length"],
+                     args["marker_length"])
+
+
+def calibration_set(model: str, samples=16):
+    """The 24 renders of a camera model ("A", "B", "C"; "D" is A distorted, returned as the
+    images themselves under "images").  Returns the render truth dict of render_board_views."""
+    import cv2  # noqa: PLC0415
+    spec = board_spec(CALIBRATION_BOARD)
+    base = "A" if model == "D" else model
+    cam = dict(CALIBRATION_MODELS[base], sensor_width=36.0, width=640, height=480)
+    views = orbit_views(CALIBRATION_VIEWS, spec.size, cam, seed=ord(base), tilt_deg=(20, 55))
+    truth = render_board_views(spec, views, samples=samples, name="cal" + base)
+    if model == "D":
+        K = np.array(truth["K"][0])
+        truth = dict(truth, dist=list(DISTORTION))
+        truth["images"] = [distort(cv2.imread(p, cv2.IMREAD_GRAYSCALE), K, DISTORTION)
+                           for p in truth["paths"]]
+    return truth
+
+
+def pose_set(samples=16):
+    """Renders of the large pose board (7 x 5 squares of 12 cm) from 1, 2 and 3 m, 4 views
+    each, 1280 x 960 (f = 1244 px)."""
+    spec = board_spec(POSE_BOARD)
+    views = []
+    for i, d in enumerate(POSE_DISTANCES):
+        views += orbit_views(POSE_VIEWS, spec.size, POSE_CAMERA, seed=100 + i,
+                             tilt_deg=(10, 40), distance=d, jitter=0.1)
+    truth = render_board_views(spec, views, samples=samples, name="pose")
+    truth["distance"] = [d for d in POSE_DISTANCES for _ in range(POSE_VIEWS)]
+    return truth
