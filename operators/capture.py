@@ -390,6 +390,160 @@ class RELIGHT_OT_camera_from_marker(_BoardOperator, bpy.types.Operator):
 
 
 # ------------------------------------------------------------------------------------------
+# merge_hdr
+# ------------------------------------------------------------------------------------------
+
+RESPONSE_ITEMS = (
+    ("DEBEVEC", "Debevec", "Response by Debevec & Malik (OpenCV CalibrateDebevec), merged by "
+                           "inverse quantisation variance"),
+    ("ROBERTSON", "Robertson", "Response and merge by Robertson et al. (OpenCV)"),
+)
+ENVIRONMENT_ITEMS = (
+    ("NONE", "Photo", "Merge the brackets into an HDR photo of the same size"),
+    ("MIRROR_BALL", "Mirror Ball", "The brackets (or one EXR) show a mirror ball: write the "
+                                   "environment it reflects as an equirect"),
+    ("FRAMES", "Posed Frames", "The scene's cameras with their photos as background images: "
+                               "write the environment they see (at infinity) as an equirect"),
+)
+FLOAT_EXTENSIONS = (".exr", ".hdr")
+
+
+class RELIGHT_OT_merge_hdr(RelightOperator, bpy.types.Operator):
+    """Merge bracketed 8-bit photos (exposure times from EXIF or exposures.json) into a linear
+    HDR OpenEXR with the recovered camera response; or write an environment map (equirect
+    OpenEXR for the World) from a mirror-ball photo or from the scene's posed frames"""
+
+    bl_idname = "relight.merge_hdr"
+    bl_label = "Merge HDR"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    directory: StringProperty(name="Brackets", subtype="DIR_PATH",
+                              description="Folder of bracketed photos (and exposures.json)")
+    output: StringProperty(name="Output", subtype="FILE_PATH", description="OpenEXR to write")
+    method: EnumProperty(name="Response", items=RESPONSE_ITEMS, default="DEBEVEC")
+    environment: EnumProperty(name="Result", items=ENVIRONMENT_ITEMS, default="NONE")
+    width: IntProperty(name="Equirect Width", default=1024, min=16, max=16384,
+                       description="Width of the environment map (height: half)")
+    ball_x: FloatProperty(name="Ball X", default=-1.0,
+                          description="Ball centre in the photo (px from the left; < 0: the "
+                                      "photo's centre)")
+    ball_y: FloatProperty(name="Ball Y", default=-1.0,
+                          description="Ball centre in the photo (px from the top; < 0: the "
+                                      "photo's centre)")
+    ball_radius: FloatProperty(name="Ball Radius", default=-1.0,
+                               description="Ball radius in the photo (px; <= 0: the photo's "
+                                           "inscribed circle)")
+    set_world: BoolProperty(name="Set World", default=True,
+                            description="An environment becomes the World's Environment "
+                                        "Texture")
+
+    def fail(self, message):
+        self.report({'ERROR'}, message)
+        return {'CANCELLED'}
+
+    def _hdr_photo(self, directory):
+        """(radiance RGB float32, sentence) of the folder: brackets merged, or its one EXR."""
+        from ..relight_addon.core.capture import hdr
+        capture, _, calibration, _ = _core()
+        paths = calibration.list_images(directory)
+        floats = [p for p in paths if os.path.splitext(p)[1].lower() in FLOAT_EXTENSIONS]
+        if self.environment == "MIRROR_BALL" and len(paths) == 1 and floats:
+            return _bridge().read_float_image(floats[0]), f"{os.path.basename(floats[0])}"
+        if floats:
+            raise capture.CaptureError(f"'{os.path.basename(floats[0])}' is already HDR: the "
+                                       f"merge takes 8-bit brackets")
+        names, images, times = hdr.read_brackets(directory)
+        response = hdr.recover_response(images, times, self.method)
+        if self.method == "DEBEVEC":
+            res = hdr.merge(images, times, response)
+        else:
+            res = {"radiance": hdr.merge_opencv(images, times, response, "ROBERTSON"),
+                   "saturated": 0.0}
+        rad = res["radiance"]
+        text = (f"{len(images)} brackets ({_seconds(times[0])}-{_seconds(times[-1])}, "
+                f"{self.method.title()} response), {hdr.dynamic_range_stops(rad):.1f} stops"
+                + (f", {100 * res['saturated']:.1f} % saturated in every bracket"
+                   if res.get("saturated") else ""))
+        return rad, text
+
+    def _frames(self, context):
+        import numpy as np
+        capture, _, _, _ = _core()
+        bridge = _bridge()
+        scene = context.scene
+        frames, skipped = [], []
+        for ob in sorted((o for o in scene.objects if o.type == "CAMERA"), key=lambda o: o.name):
+            img = bridge.camera_photo(ob)
+            if img is None:
+                skipped.append(ob.name)
+                continue
+            rgb = bridge.photo_pixels(img)
+            size = (rgb.shape[1], rgb.shape[0])
+            if not bridge.frame_matches(scene, size):
+                raise capture.CaptureError(f"The photo of '{ob.name}' ({size[0]} x {size[1]}) does "
+                                           f"not have the render frame's shape")
+            m = bridge.matrix_of(ob)
+            rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+            frames.append((bridge.camera_K(ob, scene, size), rot, rgb))
+        if not frames:
+            raise capture.CaptureError("No camera of the scene has a photo as background image")
+        return frames, skipped
+
+    def execute(self, context):
+        import numpy as np
+        from ..relight_addon.core.capture import hdr
+        capture, _, _, _ = _core()
+        bridge = _bridge()
+        output = _abs(self.output)
+        if os.path.splitext(output)[1].lower() != ".exr":
+            return self.fail("The output must be an OpenEXR file (.exr)")
+        if not os.path.isdir(os.path.dirname(output)):
+            return self.fail(f"The folder of '{output}' does not exist")
+        try:
+            if self.environment == "FRAMES":
+                frames, skipped = self._frames(context)
+                env, seen = hdr.frames_to_equirect(frames, self.width)
+                result = env
+                text = (f"Wrote the environment seen by {len(frames)} posed frames"
+                        + (f" ({len(skipped)} cameras without a photo skipped)" if skipped else "")
+                        + f" ({100 * seen.mean():.1f} % of directions seen, the rest filled from "
+                          f"neighbours)")
+            else:
+                rad, text = self._hdr_photo(_abs(self.directory))
+                if self.environment == "MIRROR_BALL":
+                    h, w = rad.shape[:2]
+                    centre = (self.ball_x if self.ball_x >= 0 else (w - 1) / 2,
+                              self.ball_y if self.ball_y >= 0 else (h - 1) / 2)
+                    cam = context.scene.camera
+                    rot = None
+                    if cam is not None:
+                        m = bridge.matrix_of(cam)
+                        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+                    result, _ = hdr.mirror_ball_to_equirect(
+                        rad, self.width, centre, self.ball_radius if self.ball_radius > 0 else None,
+                        rot)
+                    text = (f"Wrote the environment a mirror ball reflects, from {text}"
+                            f"{'' if cam is None else f', oriented by the camera {cam.name!r}'}")
+                else:
+                    result = rad
+                    text = f"Merged {text}"
+        except capture.CaptureError as ex:
+            return self.fail(str(ex))
+        bridge.write_exr(output, result)
+        h, w = result.shape[:2]
+        world = ""
+        if self.environment != "NONE" and self.set_world:
+            bridge.set_world_environment(context.scene, output)
+            world = "; set as the World"
+        self.report({'INFO'}, f"{text}: {w} x {h} EXR {os.path.basename(output)}{world}")
+        return {'FINISHED'}
+
+
+def _seconds(t):
+    return f"1/{1 / t:.0f} s" if t < 0.5 else f"{t:g} s"
+
+
+# ------------------------------------------------------------------------------------------
 # The panel's settings (scene.relight_capture)
 # ------------------------------------------------------------------------------------------
 
@@ -419,6 +573,11 @@ class RelightCaptureSettings(bpy.types.PropertyGroup):
                                  description="Photo (or folder, or movie) showing the board")
     board_object: PointerProperty(name="Board Object", type=bpy.types.Object, poll=_is_mesh,
                                   description="The board's plane in the scene")
+    brackets: StringProperty(name="Brackets", subtype="DIR_PATH",
+                             description="Folder of bracketed photos (and exposures.json)")
+    hdr_output: StringProperty(name="HDR Output", subtype="FILE_PATH", default="//merged.exr",
+                               description="OpenEXR to write")
+    environment: EnumProperty(name="Result", items=ENVIRONMENT_ITEMS, default="NONE")
 
 
 BOARD_ARGS = ("squares_x", "squares_y", "square_length", "marker_length", "dictionary")
@@ -434,4 +593,4 @@ def detach():
 
 
 classes = (RelightCaptureSettings, RELIGHT_OT_calibration_board, RELIGHT_OT_calibrate_camera,
-           RELIGHT_OT_camera_from_marker)
+           RELIGHT_OT_camera_from_marker, RELIGHT_OT_merge_hdr)

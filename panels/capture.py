@@ -61,5 +61,15 @@ class RELIGHT_PT_capture(bpy.types.Panel):
         op.calibration = s.calibration
         op.board_object = s.board_object.name if s.board_object else ""
 
+        box = layout.box()
+        box.label(text="HDR and Environment", icon='WORLD')
+        box.prop(s, "brackets")
+        box.prop(s, "hdr_output")
+        box.prop(s, "environment")
+        op = box.operator("relight.merge_hdr", icon='IMAGE_RGB_ALPHA')
+        op.directory = s.brackets
+        op.output = s.hdr_output
+        op.environment = s.environment
+
 
 classes = (RELIGHT_PT_capture,)

@@ -355,3 +355,163 @@ def pose_set(samples=16):
     truth = render_board_views(spec, views, samples=samples, name="pose")
     truth["distance"] = [d for d in POSE_DISTANCES for _ in range(POSE_VIEWS)]
     return truth
+
+
+# ------------------------------------------------------------------------------------------
+# HDR: radiance renders, brackets, mirror balls
+# ------------------------------------------------------------------------------------------
+
+def hdri_path(name="courtyard.exr"):
+    """One of the HDRIs shipped in the bpy wheel."""
+    path = os.path.join(_bpy().utils.system_resource("DATAFILES"), "studiolights", "world", name)
+    if not os.path.exists(path):
+        raise FileNotFoundError(path)
+    return path
+
+
+def _world_scene(hdri, strength=1.0):
+    bpy = _bpy()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    nt = world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(hdri)
+    bg = nt.nodes["Background"]
+    bg.inputs["Strength"].default_value = strength
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    scene.world = world
+    scene.view_settings.view_transform = "Standard"
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    return scene, cam
+
+
+def _render_float(scene, samples, seed=0, bounces=0):
+    """The render as (H, W, 3) float32 linear radiance, top row first (a 32-bit EXR)."""
+    bpy = _bpy()
+    _cycles(scene, samples, seed)
+    scene.cycles.max_bounces = scene.cycles.glossy_bounces = int(bounces)
+    import tempfile  # noqa: PLC0415
+    s = scene.render.image_settings
+    s.file_format, s.color_mode, s.color_depth = "OPEN_EXR", "RGB", "32"
+    path = os.path.join(tempfile.mkdtemp(prefix="relight_cap_"), "r.exr")
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    os.remove(path)
+    return px.reshape(h, w, 4)[::-1, :, :3].copy()
+
+
+def _cached_npz(key_parts, make):
+    bpy = _bpy()
+    key = hashlib.sha256(repr((VERSION, tuple(bpy.app.version)) + tuple(key_parts)).encode()
+                         ).hexdigest()[:32]
+    path = os.path.join(cache_dir(), key + ".npz")
+    if os.path.exists(path):
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    out = make()
+    os.makedirs(cache_dir(), exist_ok=True)
+    tmp = path + f".{os.getpid()}.tmp.npz"
+    np.savez_compressed(tmp, **out)
+    os.replace(tmp, path)
+    return out
+
+
+def radiance_render(hdri="courtyard.exr", size=(320, 240), samples=16, lens=20.0):
+    """A Cycles render (linear radiance, float32, top row first) of a shipped HDRI seen by a
+    20 mm camera looking along +Y and slightly up: the "scene" of the HDR tests."""
+    def make():
+        scene, cam = _world_scene(hdri_path(hdri))
+        apply_camera(cam, scene, dict(lens=lens, width=size[0], height=size[1],
+                                      matrix_world=look_at((0, 0, 0), (0, 1, 0.15)).tolist()))
+        return {"radiance": _render_float(scene, samples)}
+    return _cached_npz(("radiance", hdri, size, samples, lens), make)["radiance"]
+
+
+def camera_response(x):
+    """The known non-linear response of the HDR tests: a shoulder (x (1 + a) / (x + a),
+    a = 0.6) then a 1 / 2.2 gamma, on exposures clipped to [0, 1]."""
+    x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
+    a = 0.6
+    return (x * (1 + a) / (x + a)) ** (1 / 2.2)
+
+
+def brackets(radiance, times, gain=1.0):
+    """8-bit BGR photos of ``radiance`` (RGB) exposed for ``times`` through camera_response."""
+    out = []
+    for t in times:
+        v = np.round(255.0 * camera_response(radiance * gain * t))
+        out.append(np.ascontiguousarray(v[..., ::-1].astype(np.uint8)))
+    return out
+
+
+def mirror_ball_render(hdri="courtyard.exr", size=256, samples=32):
+    """An orthographic Cycles render of a perfect mirror ball (radius 1, at the origin) under
+    a shipped HDRI, the camera on -Y looking along +Y (Blender's front view), the ball filling
+    the frame.  Returns {"image": (size, size, 3) float32 linear, top row first}."""
+    def make():
+        bpy = _bpy()
+        scene, cam = _world_scene(hdri_path(hdri))
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=1.0)
+        ball = bpy.context.active_object
+        bpy.ops.object.shade_smooth()
+        mat = bpy.data.materials.new("Mirror")
+        if mat.node_tree is None:
+            mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        gl = nt.nodes.new("ShaderNodeBsdfGlossy")
+        gl.inputs["Roughness"].default_value = 0.0
+        gl.inputs["Color"].default_value = (1, 1, 1, 1)
+        nt.links.new(gl.outputs["BSDF"], out.inputs["Surface"])
+        ball.data.materials.append(mat)
+        cam.data.type = "ORTHO"
+        cam.data.ortho_scale = 2.0
+        apply_camera(cam, scene, dict(lens=50.0, width=size, height=size,
+                                      matrix_world=look_at((0, -10, 0), (0, 0, 0)).tolist()))
+        return {"image": _render_float(scene, samples, bounces=1)}
+    return _cached_npz(("mirror-ball", hdri, size, samples), make)
+
+
+CUBE_TARGETS = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+
+
+def cube_frames(hdri="courtyard.exr", size=128, samples=16):
+    """Six 90-degree renders of a shipped HDRI from the origin (the faces of a cube map):
+    [(K, camera matrix_world, (size, size, 3) float32 linear, row 0 at the top)]."""
+    def make():
+        scene, cam = _world_scene(hdri_path(hdri))
+        out = {}
+        for i, t in enumerate(CUBE_TARGETS):
+            up = (0, 1, 0) if abs(t[2]) else (0, 0, 1)
+            m = look_at((0, 0, 0), t, up=up)
+            apply_camera(cam, scene, dict(lens=18.0, sensor_width=36.0, width=size, height=size,
+                                          matrix_world=m.tolist()))
+            out[f"image{i}"] = _render_float(scene, samples)
+            out[f"K{i}"] = blender_K(cam, scene)
+            out[f"M{i}"] = np.array(cam.matrix_world)
+        return out
+    z = _cached_npz(("cube", hdri, size, samples), make)
+    return [(z[f"K{i}"], z[f"M{i}"], z[f"image{i}"]) for i in range(len(CUBE_TARGETS))]
+
+
+def hdri_pixels(name="courtyard.exr") -> np.ndarray:
+    """A shipped HDRI as (H, W, 3) float32 linear, row 0 at the top."""
+    bpy = _bpy()
+    img = bpy.data.images.load(hdri_path(name), check_existing=False)
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)[::-1, :, :3].copy()
