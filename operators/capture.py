@@ -544,6 +544,145 @@ def _seconds(t):
 
 
 # ------------------------------------------------------------------------------------------
+# project_photos
+# ------------------------------------------------------------------------------------------
+
+class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
+    """Texture the selected meshes from the posed photos (the scene's cameras, each with its
+    photo as background image; the selected cameras if any are selected): per texel the best
+    views by facing, distance and resolution, ray-cast visibility, exposures matched, holes
+    filled from their neighbours.  Meshes without UVs get an xatlas atlas ("RelightUV"); each
+    gets a new packed image and material (object-linked slots: the mesh keeps its own), which
+    Precompute reads as the photo texture"""
+
+    bl_idname = "relight.project_photos"
+    bl_label = "Project Photos"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384,
+                              description="Width and height of each mesh's new texture")
+    uv_map: StringProperty(name="UV Map", default="",
+                           description="UV map to texture (empty: the active render one)")
+    match_exposure: BoolProperty(name="Match Exposure", default=True,
+                                 description="One gain per photo and channel so that the "
+                                             "photos agree where they overlap")
+    fill_holes: BoolProperty(name="Fill Holes", default=True,
+                             description="Texels no photo sees take the colour of the nearest "
+                                         "seen ones")
+    supersample: IntProperty(name="Supersample", default=0, min=0, max=4,
+                             description="Samples a side per texel (0: from the photo pixels a "
+                                         "texel covers)")
+
+    @classmethod
+    def disabled_reason(cls, context):
+        reason = super().disabled_reason(context)
+        if reason:
+            return reason
+        if not any(o.type == "MESH" for o in (getattr(context, "selected_objects", None) or ())):
+            return "Select the meshes to texture"
+        return None
+
+    def fail(self, message):
+        self.report({'ERROR'}, message)
+        return {'CANCELLED'}
+
+    def _views(self, context):
+        import numpy as np
+        capture, _, _, _ = _core()
+        from ..relight_addon.core.capture.projection import View
+        bridge = _bridge()
+        scene = context.scene
+        chosen = [o for o in context.selected_objects if o.type == "CAMERA"]
+        cameras = chosen or sorted((o for o in scene.objects if o.type == "CAMERA"),
+                                   key=lambda o: o.name)
+        views, skipped = [], []
+        for cam in cameras:
+            img = bridge.camera_photo(cam)
+            if img is None:
+                if chosen:
+                    raise capture.CaptureError(f"Camera '{cam.name}' has no photo (an enabled "
+                                               f"background image)")
+                skipped.append(cam.name)
+                continue
+            rgb = bridge.photo_pixels(img)
+            size = (rgb.shape[1], rgb.shape[0])
+            if not bridge.frame_matches(scene, size):
+                w, h = bridge.render_size(scene)
+                raise capture.CaptureError(f"The photo of '{cam.name}' ({size[0]} x {size[1]}) "
+                                           f"does not have the render frame's shape ({w} x {h})")
+            m = bridge.matrix_of(cam)
+            m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0)
+            T = np.linalg.inv(m @ np.diag([1.0, -1.0, -1.0, 1.0]))      # world -> OpenCV camera
+            views.append(View(cam.name, bridge.camera_K(cam, scene, size), T[:3, :3], T[:3, 3], rgb))
+        if not views:
+            raise capture.CaptureError("No camera of the scene has a photo as background image")
+        return views, skipped
+
+    def execute(self, context):
+        capture, _, _, _ = _core()
+        from ..relight_addon.core.capture import projection
+        from .unwrap import UV_NAME, atlas_loop_uvs
+        bridge = _bridge()
+        meshes = [o for o in context.selected_objects if o.type == "MESH"]
+        if not meshes:
+            return self.fail("Select the meshes to texture")
+        try:
+            views, skipped = self._views(context)
+            atlases = {}
+            for obj in meshes:
+                uv = bridge.uv_layer_name(obj, self.uv_map)
+                if self.uv_map and not uv:
+                    raise capture.CaptureError(f"'{obj.name}' has no UV map '{self.uv_map}'")
+                if not uv:
+                    me = obj.data
+                    if obj.library or me.library or me.override_library or me.is_editmode:
+                        raise capture.CaptureError(f"'{obj.name}' has no UV map and cannot get "
+                                                   f"one (linked, or in Edit Mode)")
+                    if not len(me.polygons):
+                        raise capture.CaptureError(f"'{obj.name}' has no faces")
+                    atlases[obj.name] = atlas_loop_uvs(me, obj.matrix_world)[0]
+        except capture.CaptureError as ex:
+            return self.fail(str(ex))
+        except ImportError:
+            return self.fail("xatlas is not available: check the Relight dependencies")
+        # -- from here on the scene is written --
+        for obj in meshes:
+            if obj.name in atlases:
+                layer = obj.data.uv_layers.new(name=UV_NAME)
+                layer.data.foreach_set("uv", atlases[obj.name].reshape(-1))
+                obj.data.update()
+        depsgraph = context.evaluated_depsgraph_get()
+        targets = []
+        for obj in meshes:
+            uv = bridge.uv_layer_name(obj, self.uv_map) or UV_NAME
+            tris, uvs = bridge.mesh_triangles(obj, depsgraph, uv)
+            targets.append(projection.Target(obj.name, tris, uvs,
+                                             (self.texture_size, self.texture_size)))
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        try:
+            tris, owners = bridge.scene_triangles(depsgraph)
+            result = projection.project(
+                targets, views, tris, owners,
+                supersample=self.supersample or None, match_exposure=self.match_exposure,
+                fill_holes=self.fill_holes, progress=lambda f: wm.progress_update(int(100 * f)))
+        except capture.CaptureError as ex:
+            return self.fail(str(ex))
+        finally:
+            wm.progress_end()
+        for obj, res in zip(meshes, result.meshes):
+            img = bridge.image_from_texture(f"{obj.name} Photo", res.texture)
+            bridge.photo_material(obj, img, bridge.uv_layer_name(obj, self.uv_map) or UV_NAME)
+        extra = ""
+        if atlases:
+            extra += f"; {len(atlases)} meshes unwrapped by xatlas"
+        if skipped:
+            extra += f"; {len(skipped)} cameras without a photo skipped"
+        self.report({'INFO'}, result.summary() + extra)
+        return {'FINISHED'}
+
+
+# ------------------------------------------------------------------------------------------
 # The panel's settings (scene.relight_capture)
 # ------------------------------------------------------------------------------------------
 
@@ -578,6 +717,7 @@ class RelightCaptureSettings(bpy.types.PropertyGroup):
     hdr_output: StringProperty(name="HDR Output", subtype="FILE_PATH", default="//merged.exr",
                                description="OpenEXR to write")
     environment: EnumProperty(name="Result", items=ENVIRONMENT_ITEMS, default="NONE")
+    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
 
 
 BOARD_ARGS = ("squares_x", "squares_y", "square_length", "marker_length", "dictionary")
@@ -593,4 +733,4 @@ def detach():
 
 
 classes = (RelightCaptureSettings, RELIGHT_OT_calibration_board, RELIGHT_OT_calibrate_camera,
-           RELIGHT_OT_camera_from_marker, RELIGHT_OT_merge_hdr)
+           RELIGHT_OT_camera_from_marker, RELIGHT_OT_merge_hdr, RELIGHT_OT_project_photos)

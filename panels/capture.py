@@ -71,5 +71,11 @@ class RELIGHT_PT_capture(bpy.types.Panel):
         op.output = s.hdr_output
         op.environment = s.environment
 
+        box = layout.box()
+        box.label(text="Photo Textures", icon='IMAGE_DATA')
+        box.prop(s, "texture_size")
+        op = box.operator("relight.project_photos", icon='TEXTURE')
+        op.texture_size = s.texture_size
+
 
 classes = (RELIGHT_PT_capture,)

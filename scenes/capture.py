@@ -515,3 +515,201 @@ def hdri_pixels(name="courtyard.exr") -> np.ndarray:
     img.pixels.foreach_get(px)
     bpy.data.images.remove(img)
     return px.reshape(h, w, 4)[::-1, :, :3].copy()
+
+
+# ------------------------------------------------------------------------------------------
+# Projection: a small emission-only scene (the photos show the textures exactly)
+# ------------------------------------------------------------------------------------------
+
+FLOOR_TEXELS = 96
+BOX_RGB = (0.8, 0.08, 0.06)
+PROJECTION_CAMERAS = (  # eye, exposure (stops)
+    ((2.2, -1.6, 1.9), 0.0), ((-2.0, -1.8, 1.7), 0.0), ((0.3, 2.4, 2.0), 1.0),
+)
+PROJECTION_SIZE = (320, 240)
+
+
+def floor_texture(n=FLOOR_TEXELS) -> np.ndarray:
+    """The floor's emission colours (n, n, 3) linear, Blender row order: a colour gradient
+    under a 6 x 6 checker of two strengths."""
+    y, x = np.mgrid[0:n, 0:n] / (n - 1.0)
+    base = np.stack([0.15 + 0.6 * x, 0.2 + 0.5 * y, 0.55 - 0.35 * x * y], -1)
+    check = ((np.floor(x * 5.999) + np.floor(y * 5.999)) % 2)[..., None]
+    return (base * (0.55 + 0.45 * check)).astype(np.float32)
+
+
+def _emission(bpy, name, image=None, rgb=None):
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    if image is not None:
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        tex.interpolation = "Closest"
+        nt.links.new(tex.outputs["Color"], em.inputs["Color"])
+    else:
+        em.inputs["Color"].default_value = tuple(rgb) + (1.0,)
+    return mat
+
+
+def projection_scene():
+    """Factory-empty scene: "Floor" (2 x 2 m, UV [0, 1]^2, emission texture floor_texture),
+    "Box" (0.5 m cube on it, emission BOX_RGB, no UVs), three cameras "Cam0".."Cam2"
+    looking at the floor (no photos yet).  Returns (scene, floor, box, cameras)."""
+    bpy = _bpy()
+    import mathutils  # noqa: PLC0415
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    me = bpy.data.meshes.new("Floor")
+    me.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
+    me.uv_layers.new(name="UVMap").data.foreach_set("uv", [0, 0, 1, 0, 1, 1, 0, 1])
+    floor = bpy.data.objects.new("Floor", me)
+    scene.collection.objects.link(floor)
+    tex = floor_texture()
+    img = bpy.data.images.new("FloorTexture", tex.shape[1], tex.shape[0], alpha=False,
+                              float_buffer=True)
+    rgba = np.ones(tex.shape[:2] + (4,), np.float32)
+    rgba[..., :3] = tex
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()
+    me.materials.append(_emission(bpy, "Floor", image=img))
+    s = 0.25
+    v = [(x, y, z) for z in (0, 2 * s) for y in (-s, s) for x in (-s, s)]
+    f = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    bm = bpy.data.meshes.new("Box")
+    bm.from_pydata(v, [], f)
+    bm.materials.append(_emission(bpy, "Box", rgb=BOX_RGB))
+    box = bpy.data.objects.new("Box", bm)
+    box.location = (0.1, 0.05, 0.0)
+    scene.collection.objects.link(box)
+    world = bpy.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
+    scene.world = world
+    scene.view_settings.view_transform = "Standard"
+    scene.render.resolution_x, scene.render.resolution_y = PROJECTION_SIZE
+    cams = []
+    for i, (eye, _) in enumerate(PROJECTION_CAMERAS):
+        cam = bpy.data.objects.new(f"Cam{i}", bpy.data.cameras.new(f"Cam{i}"))
+        cam.data.lens = 24.0
+        scene.collection.objects.link(cam)
+        cam.matrix_world = mathutils.Matrix(look_at(eye, (0, 0, 0)).tolist())
+        cams.append(cam)
+    scene.camera = cams[0]
+    bpy.context.view_layer.update()
+    return scene, floor, box, cams
+
+
+def projection_photos(samples=16):
+    """8-bit sRGB PNG photos of projection_scene by its three cameras (the third exposed one
+    stop brighter), cached.  Returns the paths."""
+    bpy = _bpy()
+    key = hashlib.sha256(repr((VERSION, tuple(bpy.app.version), "projection", FLOOR_TEXELS,
+                               BOX_RGB, PROJECTION_CAMERAS, PROJECTION_SIZE, samples)).encode()
+                         ).hexdigest()[:32]
+    folder = os.path.join(cache_dir(), key)
+    paths = [os.path.join(folder, f"cam{i}.png") for i in range(len(PROJECTION_CAMERAS))]
+    if all(os.path.exists(p) for p in paths):
+        return paths
+    os.makedirs(folder, exist_ok=True)
+    scene, floor, box, cams = projection_scene()
+    _cycles(scene, samples, 0)
+    scene.render.image_settings.color_mode = "RGB"
+    for cam, (_, stops), path in zip(cams, PROJECTION_CAMERAS, paths):
+        scene.camera = cam
+        scene.view_settings.exposure = stops
+        tmp = path + ".tmp.png"
+        scene.render.filepath = tmp
+        bpy.ops.render.render(write_still=True)
+        os.replace(tmp, path)
+    return paths
+
+
+# ------------------------------------------------------------------------------------------
+# The demo office photographed by posed cameras
+# ------------------------------------------------------------------------------------------
+
+OFFICE_CAMERAS = (  # eye, target, exposure (stops): corners, across the room, up at the ceiling
+    ((0.3, 0.3, 1.6), (3.5, 3.0, 0.6), 0.0), ((4.7, 0.3, 1.6), (1.5, 3.0, 0.6), 0.0),
+    ((4.7, 3.7, 1.6), (1.5, 1.0, 0.6), 0.0), ((0.3, 3.7, 1.6), (3.5, 1.0, 0.6), 0.5),
+    ((2.5, 0.25, 2.2), (2.5, 3.5, 0.3), 0.0), ((2.5, 3.75, 2.2), (2.5, 0.5, 0.3), 0.0),
+    ((0.25, 2.0, 2.4), (4.5, 2.0, 0.5), 0.0), ((4.75, 2.0, 2.4), (0.5, 2.0, 0.5), -0.5),
+    ((1.0, 1.0, 0.5), (3.0, 2.6, 2.8), 0.0), ((4.0, 3.0, 0.5), (2.0, 1.4, 2.8), 0.0),
+)
+OFFICE_LENS = 16.0
+OFFICE_PHOTO = (320, 240)
+
+
+def office_cameras(bpy, scene, paths=None):
+    """The office's photo cameras "Photo 0".. (lens 16 mm, 36 mm sensor), each with its photo
+    as background image when ``paths`` are given."""
+    import mathutils  # noqa: PLC0415
+    cams = []
+    for i, (eye, target, _) in enumerate(OFFICE_CAMERAS):
+        cam = bpy.data.objects.new(f"Photo {i}", bpy.data.cameras.new(f"Photo {i}"))
+        cam.data.lens, cam.data.sensor_width = OFFICE_LENS, 36.0
+        cam.data.clip_start = 0.01
+        scene.collection.objects.link(cam)
+        cam.matrix_world = mathutils.Matrix(look_at(eye, target).tolist())
+        if paths is not None:
+            bg = cam.data.background_images.new()
+            bg.image = bpy.data.images.load(paths[i], check_existing=True)
+            cam.data.show_background_images = True
+        cams.append(cam)
+    scene.render.resolution_x, scene.render.resolution_y = OFFICE_PHOTO
+    scene.render.resolution_percentage = 100
+    bpy.context.view_layer.update()
+    return cams
+
+
+def office_photos(samples=32, texture_size=48):
+    """8-bit sRGB photos (Standard view transform, the listed exposures) of the demo office
+    (seed 0, two lamps, build_office) by OFFICE_CAMERAS, Cycles, cached.  The lamps are hidden
+    from camera rays (the ceiling behind them shows, as the bake has it).  Returns the paths;
+    the scene is left built, with its cameras."""
+    bpy = _bpy()
+    from scenes.office import build_office  # noqa: PLC0415
+    key = hashlib.sha256(repr((VERSION, tuple(bpy.app.version), "office", OFFICE_CAMERAS,
+                               OFFICE_LENS, OFFICE_PHOTO, samples, texture_size)).encode()
+                         ).hexdigest()[:32]
+    folder = os.path.join(cache_dir(), key)
+    paths = [os.path.join(folder, f"photo{i}.png") for i in range(len(OFFICE_CAMERAS))]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    info = build_office(seed=0, n_lamps=2, texture_size=texture_size)
+    scene = bpy.context.scene
+    if all(os.path.exists(p) for p in paths):
+        office_cameras(bpy, scene, paths)
+        return paths, info
+    os.makedirs(folder, exist_ok=True)
+    cams = office_cameras(bpy, scene)
+    for name in info.lamps:
+        scene.objects[name].visible_camera = False
+    cy = scene.cycles
+    cy.device, cy.samples, cy.seed = "CPU", int(samples), 0
+    cy.use_adaptive_sampling = False
+    cy.use_denoising = False
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    scene.render.image_settings.color_depth = "8"
+    for cam, (_, _, stops), path in zip(cams, OFFICE_CAMERAS, paths):
+        scene.camera = cam
+        scene.view_settings.exposure = stops
+        scene.render.filepath = path + ".tmp.png"
+        bpy.ops.render.render(write_still=True)
+        os.replace(path + ".tmp.png", path)
+    scene.view_settings.exposure = 0.0
+    for name in info.lamps:
+        scene.objects[name].visible_camera = True
+    for cam, path in zip(cams, paths):
+        bg = cam.data.background_images.new()
+        bg.image = bpy.data.images.load(path, check_existing=True)
+        cam.data.show_background_images = True
+    return paths, info

@@ -316,4 +316,4 @@ def test_capture_panel():
     importlib.import_module("relight_ext.panels.capture").RELIGHT_PT_capture.draw(panel, ctx)
     ops = {x[1] for x in log if x[0] == "operator"}
     assert {"relight.calibration_board", "relight.calibrate_camera",
-            "relight.camera_from_marker", "relight.merge_hdr"} <= ops
+            "relight.camera_from_marker", "relight.merge_hdr", "relight.project_photos"} <= ops

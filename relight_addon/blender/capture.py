@@ -231,3 +231,111 @@ def set_world_environment(scene, path):
     env.location = (bg.location[0] - 300, bg.location[1])
     nt.links.new(env.outputs["Color"], bg.inputs["Color"])
     return env
+
+
+# ------------------------------------------------------------------------------------------
+# Meshes
+# ------------------------------------------------------------------------------------------
+
+MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+
+
+def _world_triangles(me, matrix):
+    """(triangles (t, 3, 3) world, loop indices (t, 3)) of a mesh's loop triangles."""
+    me.calc_loop_triangles()
+    nv, nt = len(me.vertices), len(me.loop_triangles)
+    co = np.empty(nv * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    m = np.array(matrix, np.float64)
+    world = co.reshape(nv, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    tv = np.empty(nt * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", tv)
+    tl = np.empty(nt * 3, np.int32)
+    me.loop_triangles.foreach_get("loops", tl)
+    return world[tv].reshape(nt, 3, 3), tl.reshape(nt, 3)
+
+
+def uv_layer_name(obj, uv_name=""):
+    """The UV map projection writes into: ``uv_name``, else the active render one ("" none)."""
+    layers = obj.data.uv_layers
+    if uv_name:
+        return uv_name if layers.get(uv_name) is not None else ""
+    layer = next((u for u in layers if u.active_render), layers.active)
+    return layer.name if layer is not None else ""
+
+
+def mesh_triangles(obj, depsgraph, uv_name):
+    """World triangles (t, 3, 3) of an object's evaluated mesh and their UVs (t, 3, 2) from
+    the UV map ``uv_name``."""
+    ev = obj.evaluated_get(depsgraph)
+    me = ev.to_mesh()
+    try:
+        tris, loops = _world_triangles(me, ev.matrix_world)
+        layer = me.uv_layers.get(uv_name)
+        if layer is None:
+            raise CaptureError(f"'{obj.name}' has no UV map '{uv_name}' after its modifiers")
+        buf = np.empty(len(me.loops) * 2, np.float32)
+        layer.data.foreach_get("uv", buf)
+        return tris, buf.reshape(-1, 2)[loops].astype(np.float64)
+    finally:
+        ev.to_mesh_clear()
+
+
+def scene_triangles(depsgraph):
+    """World triangles of every renderable mesh-like object and instance (the occluders), and
+    the name of the object each belongs to (an instance: its object's name)."""
+    parts, names = [], []
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        owner = inst.parent if inst.is_instance and inst.parent is not None else ob
+        if ob.type not in MESH_LIKE or owner.original.hide_render:
+            continue
+        try:
+            me = ob.to_mesh()
+        except RuntimeError:
+            continue
+        if me is None:
+            continue
+        try:
+            if len(me.polygons):
+                tris = _world_triangles(me, inst.matrix_world)[0]
+                parts.append(tris)
+                name = ob.original.name if not inst.is_instance else f"{owner.original.name}/{ob.original.name}"
+                names += [name] * len(tris)
+        finally:
+            ob.to_mesh_clear()
+    return (np.concatenate(parts) if parts else np.zeros((0, 3, 3))), names
+
+
+def image_from_texture(name, rgb):
+    """A packed float image (linear) from (h, w, 3) in Blender's row order (row 0 at v = 0)."""
+    return new_float_image(name, np.asarray(rgb)[::-1])
+
+
+def photo_material(obj, image, uv_name):
+    """A new material showing ``image`` through ``uv_name`` as a diffuse base colour (what
+    Precompute reads), in object-linked slots: the mesh keeps its own materials."""
+    mat = bpy.data.materials.new(f"{obj.name} Photo")
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    bsdf = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Roughness"].default_value = 1.0
+    for key in ("Specular IOR Level", "Specular"):
+        if key in bsdf.inputs:
+            bsdf.inputs[key].default_value = 0.0
+            break
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-450, 250)
+    uvn = nt.nodes.new("ShaderNodeUVMap")
+    uvn.uv_map = uv_name
+    uvn.location = (-700, 250)
+    nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    if not obj.material_slots:
+        obj.data.materials.append(None)
+    for slot in obj.material_slots:
+        slot.link = "OBJECT"
+        slot.material = mat
+    return mat
