@@ -713,3 +713,26 @@ def office_photos(samples=32, texture_size=48):
         bg.image = bpy.data.images.load(path, check_existing=True)
         cam.data.show_background_images = True
     return paths, info
+
+
+PATH_FRAMES = 30
+PATH_CAMERA = dict(lens=35.0, sensor_width=36.0, width=640, height=480)
+
+
+def path_views():
+    """A camera path around the pose board: an arc of 60 degrees at 1.6-2.4 m, rising, with a
+    slow roll, looking at a point drifting over the board."""
+    views = []
+    for i in range(PATH_FRAMES):
+        s = i / (PATH_FRAMES - 1)
+        az = np.radians(-30 + 60 * s)
+        d = 1.6 + 0.8 * s
+        eye = np.array([d * np.sin(az) * 0.8, -0.3 + 0.4 * s, d * np.cos(az)])
+        aim = np.array([0.05 * np.sin(3 * s), 0.04 * s, 0.0])
+        views.append(dict(PATH_CAMERA, matrix_world=look_at(eye, aim, roll_deg=10 * s).tolist()))
+    return views
+
+
+def pose_path_set(samples=16):
+    """Renders of the pose board along path_views (640 x 480), for the path smoothing."""
+    return render_board_views(board_spec(POSE_BOARD), path_views(), samples=samples, name="path")

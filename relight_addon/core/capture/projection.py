@@ -201,7 +201,7 @@ def _footprint(view: View, tx: _Texels) -> np.ndarray:
     to_cam = view.centre[None] - pts
     cos = np.einsum("ij,ij->i", tx.normal, to_cam) / np.maximum(np.linalg.norm(to_cam, axis=1), 1e-300)
     f = 0.5 * (view.K[0, 0] + view.K[1, 1])
-    ppt = (f * tx.size / np.maximum(z, 1e-300)) ** 2 * np.clip(cos, 0, 1)
+    ppt = (f * tx.size / np.where(z > 1e-9, z, np.inf)) ** 2 * np.clip(cos, 0, 1)   # 0 behind
     inside = (z > 0) & (cos > MIN_COS) & (uv[:, 0] > -0.5) & (uv[:, 0] < w - 0.5) \
         & (uv[:, 1] > -0.5) & (uv[:, 1] < h - 0.5)
     return np.where(inside, ppt, 0.0)
@@ -267,7 +267,7 @@ def _quality(view: View, tx: _Texels, occluder, lift, own, maps, rows=None, clea
     dist = np.linalg.norm(to_cam, axis=1)
     cos = np.einsum("ij,ij->i", nrm, to_cam) / np.maximum(dist, 1e-300)
     f = 0.5 * (view.K[0, 0] + view.K[1, 1])
-    ppt = (f * tx.size[idx] / np.maximum(z, 1e-300)) ** 2 * np.clip(cos, 0, 1)
+    ppt = (f * tx.size[idx] / np.where(z > 1e-9, z, np.inf)) ** 2 * np.clip(cos, 0, 1)
     margin = BORDER_FEATHER * min(h, w)
     edge = np.minimum(np.minimum(uv[:, 0] + 0.5, w - 0.5 - uv[:, 0]),
                       np.minimum(uv[:, 1] + 0.5, h - 0.5 - uv[:, 1]))
