@@ -112,7 +112,11 @@ class RELIGHT_OT_calibration_board(_BoardOperator, bpy.types.Operator):
             spec = self.spec()
             layout = board.page_layout(spec, self.paper)      # fails before writing anything
             info = board.write_png(spec, png)
-            board.write_pdf(spec, pdf, self.paper)
+            try:
+                board.write_pdf(spec, pdf, self.paper)
+            except Exception:
+                os.remove(png)                              # both files or neither
+                raise
         except capture.CaptureError as ex:
             return self.fail(str(ex))
         except OSError as ex:
@@ -231,10 +235,17 @@ class RELIGHT_OT_calibrate_camera(_BoardOperator, bpy.types.Operator):
         elif not self.set_camera:
             cam_text = "camera left alone"
         d = calib.dist_coeffs
-        self.report({'INFO'}, f"Calibrated from {calib.summary()}; k1 {d[0]:.4f}, k2 {d[1]:.4f}; "
-                              f"wrote {os.path.basename(output)}; {cam_text}"
-                              + ("; undistorted photos written" if _abs(self.undistorted_directory)
-                                 else ""))
+        shift = calibration.max_distortion_px(calib)
+        if _abs(self.undistorted_directory):
+            dist_text = f"the photos without it ({shift:.1f} px at most) written for backgrounds"
+        elif shift > 0.5:
+            dist_text = (f"Blender renders without it ({shift:.1f} px at most): set Undistorted "
+                         f"Photos for backgrounds")
+        else:
+            dist_text = f"under {shift:.1f} px"
+        self.report({'INFO'}, f"Calibrated from {calib.summary()}; distortion k1 {d[0]:.4f}, "
+                              f"k2 {d[1]:.4f}, {dist_text}; wrote {os.path.basename(output)}; "
+                              f"{cam_text}")
         return {'FINISHED'}
 
 

@@ -79,7 +79,7 @@ def _write(folder, images, prefix="view"):
 
 @pytest.fixture(scope="module")
 def calibration_photos(tmp_path_factory):
-    images, _ = _views(SPEC, 14, seed=5)
+    images, _ = _views(SPEC, 10, seed=5)
     return _write(tmp_path_factory.mktemp("calib"), images), images
 
 
@@ -95,7 +95,8 @@ def test_calibration_board_writes_png_and_pdf(tmp_path):
     bpy.ops.relight.calibration_board(filepath=str(path), paper="A4", **ARGS)
     assert path.exists() and (tmp_path / "board.pdf").exists()
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    det = bd.Detector(SPEC).detect(cv2.copyMakeBorder(img, 40, 40, 40, 40, cv2.BORDER_CONSTANT,
+    img = cv2.resize(img, (img.shape[1] // 4, img.shape[0] // 4), interpolation=cv2.INTER_AREA)
+    det = bd.Detector(SPEC).detect(cv2.copyMakeBorder(img, 20, 20, 20, 20, cv2.BORDER_CONSTANT,
                                                       value=255))
     assert len(det) == SPEC.n_corners
 
@@ -234,6 +235,34 @@ def test_camera_from_marker_sequence(tmp_path):
         scene.frame_set(10 + i)
         angle, dist = _pose_error(np.array(cam.matrix_world), truth)
         assert angle < 0.3 and dist < 0.01, (i, angle, dist)   # frame 4 from its neighbours
+
+
+def test_camera_from_marker_movie(tmp_path):
+    """A movie (MJPG AVI, what OpenCV writes everywhere): one key per frame."""
+    scene, cam, board, calib = _pose_scene(tmp_path)
+    centre = np.array(board.matrix_world)[:3, 3]
+    normal = np.array(board.matrix_world)[:3, 2]
+    movie = str(tmp_path / "take.avi")
+    out = cv2.VideoWriter(movie, cv2.VideoWriter_fourcc(*"MJPG"), 24, SIZE)
+    truths = []
+    for i in range(6):
+        truths.append(sc.look_at(centre + (1.3 + 0.05 * i) * normal, centre, roll_deg=2 * i))
+        out.write(cv2.cvtColor(_photo_of(board, truths[-1]), cv2.COLOR_GRAY2BGR))
+    out.release()
+    scene.frame_start = 1
+    bpy.ops.relight.camera_from_marker(filepath=movie, calibration=calib, board_object="Board",
+                                       smoothing=0.0, **POSE_ARGS)
+    fcurves = [fc for fc in _fcurves(cam) if fc.data_path == "location"]
+    assert [len(fc.keyframe_points) for fc in fcurves] == [6, 6, 6]
+    for i, truth in enumerate(truths):
+        scene.frame_set(1 + i)
+        angle, dist = _pose_error(np.array(cam.matrix_world), truth)
+        assert angle < 0.2 and dist < 0.005, (i, angle, dist)          # JPEG frames
+
+
+def _fcurves(obj):
+    bridge = importlib.import_module("relight_ext.relight_addon.blender.capture")
+    return bridge._fcurves(obj, obj.animation_data.action)
 
 
 def test_camera_from_marker_bad_input(tmp_path):

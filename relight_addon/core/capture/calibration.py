@@ -331,6 +331,18 @@ def scale_camera_matrix(k, from_size, to_size) -> np.ndarray:
     return k
 
 
+def max_distortion_px(calib: Calibration, grid: int = 16) -> float:
+    """The largest shift (px) the distortion gives a point of the frame (a grid of points)."""
+    cv2 = _cv2()
+    w, h = calib.image_size
+    k = np.asarray(calib.camera_matrix, np.float64)
+    yy, xx = np.mgrid[0:h - 1:grid * 1j, 0:w - 1:grid * 1j]
+    pix = np.stack([xx.ravel(), yy.ravel(), np.ones(xx.size)], 1)
+    rays = pix @ np.linalg.inv(k).T
+    d, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), k, np.asarray(calib.dist_coeffs))
+    return float(np.abs(d.reshape(-1, 2) - pix[:, :2]).max())
+
+
 def undistort(image, calib: Calibration) -> np.ndarray:
     """The photo as a distortion-free pinhole camera with the same K would have taken it
     (what a Blender camera set from the calibration renders)."""

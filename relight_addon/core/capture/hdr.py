@@ -136,8 +136,15 @@ def recover_response(images, times, method="DEBEVEC") -> np.ndarray:
     else:
         raise CaptureError(f"Unknown response method '{method}'")
     resp = np.asarray(cal.process(list(images), t), np.float64).reshape(256, 3)
-    if not np.all(np.isfinite(resp)):
-        raise CaptureError("The camera response could not be recovered from these brackets")
+    # 8-bit values no bracket shows can come back non-finite (Robertson): interpolated in log
+    # over the values that are known
+    z = np.arange(256)
+    for c in range(3):
+        good = np.isfinite(resp[:, c]) & (resp[:, c] > 0)
+        if good.sum() < 16:
+            raise CaptureError("The camera response could not be recovered from these brackets")
+        if not good.all():
+            resp[:, c] = np.exp(np.interp(z, z[good], np.log(resp[good, c])))
     return resp
 
 
