@@ -165,8 +165,8 @@ def pose():
 
 
 def path():
-    """The camera path rendered, with sensor noise (sigma 3 grey levels) and a frame whose
-    board is half covered: raw poses against the smoothed ones."""
+    """The camera path rendered, with sensor noise (sigma 3 and 8 grey levels) and a frame
+    whose board is half covered: raw poses against the smoothed ones."""
     cv2 = _cv2()
     from relight_addon.core.capture import board as bd
     from relight_addon.core.capture import pose as ps
@@ -175,39 +175,42 @@ def path():
     truth = sc.pose_path_set()
     det = bd.Detector(spec)
     frame = sc.board_frame_world(np.array(truth["board_matrix_world"]), spec.size)
-    rng = np.random.default_rng(1)
-    mats, valid = [], []
-    for i, p in enumerate(truth["paths"]):
-        im = cv2.imread(p, cv2.IMREAD_GRAYSCALE).astype(np.float32)
-        im = np.clip(np.rint(im + rng.normal(0, 3.0, im.shape)), 0, 255).astype(np.uint8)
-        if i == 17:                                  # an occluder over half of the board
-            im[:, : im.shape[1] // 2] = 120
-        try:
-            pose_i = ps.board_pose(det.detect(im), spec, np.array(truth["K"][i]), np.zeros(5))
-            mats.append(ps.camera_world_matrix(frame, pose_i))
-            valid.append(True)
-        except Exception:
-            mats.append(np.eye(4))
-            valid.append(False)
-    mats, valid = np.stack(mats), np.array(valid)
     gt = np.array(truth["matrix_world"])
-    rows = []
-    for label, smoothing, reject in (("raw poses", 0.0, False), ("outliers rejected", 0.0, True),
-                                     ("slerp smoothing 0.3", 0.3, True),
-                                     ("slerp smoothing 0.5", 0.5, True),
-                                     ("slerp smoothing 0.7", 0.7, True)):
-        if smoothing == 0 and not reject:
-            sm, rej = mats, np.zeros(len(mats), bool)
-            ok = valid
-        else:
-            sm, rej = ps.smooth_path(mats, valid, smoothing, reject)
-            ok = np.ones(len(mats), bool)
-        e = np.array([_matrix_error(sm[i], gt[i]) for i in range(len(gt)) if ok[i]])
-        rows.append(dict(method=label, rot_mean=float(e[:, 0].mean()), rot_max=float(e[:, 0].max()),
-                         pos_mean=float(e[:, 1].mean()), pos_max=float(e[:, 1].max()),
-                         rejected=int(rej.sum()), frames=int(ok.sum())))
+    rows, missing = [], {}
+    for noise in (3.0, 8.0):
+        rng = np.random.default_rng(1)
+        mats, valid = [], []
+        for i, p in enumerate(truth["paths"]):
+            im = cv2.imread(p, cv2.IMREAD_GRAYSCALE).astype(np.float32)
+            im = np.clip(np.rint(im + rng.normal(0, noise, im.shape)), 0, 255).astype(np.uint8)
+            if i == 17:                                  # an occluder over half of the board
+                im[:, : im.shape[1] // 2] = 120
+            try:
+                pose_i = ps.board_pose(det.detect(im), spec, np.array(truth["K"][i]), np.zeros(5))
+                mats.append(ps.camera_world_matrix(frame, pose_i))
+                valid.append(True)
+            except Exception:
+                mats.append(np.eye(4))
+                valid.append(False)
+        mats, valid = np.stack(mats), np.array(valid)
+        missing[noise] = int((~valid).sum())
+        for label, smoothing, reject in (("raw poses", 0.0, False),
+                                         ("outliers rejected", 0.0, True),
+                                         ("slerp smoothing 0.3", 0.3, True),
+                                         ("slerp smoothing 0.5", 0.5, True),
+                                         ("slerp smoothing 0.7", 0.7, True)):
+            if smoothing == 0 and not reject:
+                sm, rej, ok = mats, np.zeros(len(mats), bool), valid
+            else:
+                sm, rej = ps.smooth_path(mats, valid, smoothing, reject)
+                ok = np.ones(len(mats), bool)
+            e = np.array([_matrix_error(sm[i], gt[i]) for i in range(len(gt)) if ok[i]])
+            rows.append(dict(noise=noise, method=label, rot_mean=float(e[:, 0].mean()),
+                             rot_max=float(e[:, 0].max()), pos_mean=float(e[:, 1].mean()),
+                             pos_max=float(e[:, 1].max()), rejected=int(rej.sum()),
+                             frames=int(ok.sum())))
     print("path", flush=True)
-    return {"rows": rows, "frames": len(gt), "no_board": int((~valid).sum())}
+    return {"rows": rows, "frames": len(gt), "no_board": missing}
 
 
 # ------------------------------------------------------------------------------------------
@@ -415,11 +418,15 @@ def speed_calibration(folder):
 
 def speed_projection(folder):
     """The timed command: 8 photos of 2048^2 onto a 100k-face model, 2048^2 texture."""
+    cv2 = _cv2()
     from relight_addon.core.capture import projection
+    from relight_addon.core.texture.colour import srgb_to_linear
     z = np.load(os.path.join(folder, "scene.npz"))
-    views = [projection.View(f"v{i}", z[f"K{i}"], z[f"R{i}"], z[f"t{i}"],
-                             np.load(os.path.join(folder, f"photo{i}.npy")))
-             for i in range(int(z["n"]))]
+    views = []
+    for i in range(int(z["n"])):          # 8-bit sRGB photos, decoded as the operator does
+        img = cv2.imread(os.path.join(folder, f"photo{i}.png"))[..., ::-1]
+        views.append(projection.View(f"v{i}", z[f"K{i}"], z[f"R{i}"], z[f"t{i}"],
+                                     srgb_to_linear(img.astype(np.float32) / 255.0)))
     target = projection.Target("model", z["tris"], z["uvs"], (2048, 2048))
     res = projection.project([target], views, z["tris"], ["model"] * len(z["tris"]))
     print(json.dumps({"seen": float(res.meshes[0].seen.mean()), "faces": int(len(z["tris"]))}))
@@ -454,7 +461,7 @@ def _prepare_speed(tmp):
 
 def _speed_scene(folder):
     """A 100k-triangle height field (1 x 1 m, bumps) with a grid UV atlas, 8 cameras around
-    it and 8 random-texture 2048^2 photos."""
+    it and 8 random-texture 2048^2 photos (8-bit PNG)."""
     n = 224                                   # (n - 1)^2 * 2 = 99,458 triangles
     y, x = np.mgrid[0:n, 0:n] / (n - 1.0)
     z = 0.05 * np.sin(8 * x) * np.cos(6 * y)
@@ -476,7 +483,8 @@ def _speed_scene(folder):
         out[f"K{k}"], out[f"R{k}"], out[f"t{k}"] = K, T[:3, :3], T[:3, 3]
         img = rng.random((64, 64, 3)).astype(np.float32)
         photo = _cv2().resize(img, (2048, 2048), interpolation=_cv2().INTER_CUBIC)
-        np.save(os.path.join(folder, f"photo{k}.npy"), np.clip(photo, 0, 1).astype(np.float32))
+        _cv2().imwrite(os.path.join(folder, f"photo{k}.png"),
+                       np.clip(255 * photo, 0, 255).astype(np.uint8))
     np.savez(os.path.join(folder, "scene.npz"), **out)
 
 
@@ -487,14 +495,16 @@ def _timed(args, runs=3):
         res = subprocess.run([fb, "-n", str(runs), "--warmup", "0", "--timeout", "1200", "--"] + args,
                              capture_output=True, text=True, timeout=1300)
         m = re.search(r"A wall s\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)", res.stdout)
+        c = re.search(r"A cpu s\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)", res.stdout)
         if m:
-            return float(m.group(2)), "farm-bench, median of %d" % runs, res.stdout
+            return (float(m.group(2)), float(c.group(2)) if c else float("nan"),
+                    "farm-bench, median of %d" % runs)
     times = []
     for _ in range(runs):
         t0 = time.perf_counter()
         subprocess.run(args, capture_output=True, check=True)
         times.append(time.perf_counter() - t0)
-    return float(np.median(times)), "script clock, median of %d" % runs, ""
+    return float(np.median(times)), float("nan"), "script clock, median of %d" % runs
 
 
 def speed():
@@ -502,14 +512,15 @@ def speed():
     cal_dir, proj_dir = _prepare_speed(tmp)
     me = [sys.executable, os.path.abspath(__file__)]
     rows = []
-    t, how, _ = _timed(me + ["speed-calibration", cal_dir])
+    load0 = os.getloadavg()[0]
+    t, cpu, how = _timed(me + ["speed-calibration", cal_dir])
     rows.append(dict(task="calibration: 25 views of 1280 x 960 (detect + re-refine + calibrate)",
-                     seconds=t, how=how))
-    t, how, _ = _timed(me + ["speed-projection", proj_dir])
+                     seconds=t, cpu=cpu, how=how))
+    t, cpu, how = _timed(me + ["speed-projection", proj_dir])
     rows.append(dict(task="projection: 8 photos of 2048^2 onto 99,458 faces, 2048^2 texture",
-                     seconds=t, how=how))
+                     seconds=t, cpu=cpu, how=how))
     print("speed", flush=True)
-    return {"rows": rows}
+    return {"rows": rows, "load": [load0, os.getloadavg()[0]]}
 
 
 # ------------------------------------------------------------------------------------------
@@ -565,15 +576,16 @@ def write_report(res, path):
     if "path" in res:
         p = res["path"]
         L += ["## Camera path smoothing", "",
-              f"{p['frames']} frames of 640 x 480 (f = 622 px) along an arc at 1.6-2.4 m, Gaussian "
-              f"noise of sigma 3 grey levels added, frame 17 half covered ({p['no_board']} frames "
-              "without a pose).  Errors against the rendered path over every frame with a pose "
-              "(rejected and missing frames filled by slerp once rejection is on).", "",
-              "| poses | rotation mean deg | rotation max deg | position mean mm | position max mm | "
-              "rejected | frames |", "|---|---|---|---|---|---|---|"]
+              f"{p['frames']} frames of 640 x 480 (f = 622 px) along an arc at 1.6-2.4 m (3-4 cm "
+              "and about 2 degrees a frame), Gaussian noise added, frame 17 half covered.  Errors "
+              "against the rendered path over every frame with a pose (rejected and missing "
+              "frames filled by slerp once rejection is on).  Frames without a pose: "
+              + ", ".join(f"{v} at sigma {k}" for k, v in p["no_board"].items()) + ".", "",
+              "| noise sigma | poses | rotation mean deg | rotation max deg | position mean mm | "
+              "position max mm | rejected | frames |", "|---|---|---|---|---|---|---|---|"]
         for r in p["rows"]:
-            L.append(f"| {r['method']} | {r['rot_mean']:.4f} | {r['rot_max']:.4f} | {r['pos_mean']:.2f} | "
-                     f"{r['pos_max']:.2f} | {r['rejected']} | {r['frames']} |")
+            L.append(f"| {r['noise']:g} | {r['method']} | {r['rot_mean']:.4f} | {r['rot_max']:.4f} | "
+                     f"{r['pos_mean']:.2f} | {r['pos_max']:.2f} | {r['rejected']} | {r['frames']} |")
         L.append("")
     if "hdr" in res:
         h = res["hdr"]
@@ -627,11 +639,15 @@ def write_report(res, path):
             L.append(f"| {lab} | {pre} | {b['mean']:.2f} / {b['p95']:.2f} | {q['mean']:.2f} / {q['p95']:.2f} |")
         L.append("")
     if "speed" in res:
+        load = res["speed"].get("load", [float("nan")] * 2)
         L += ["## Speed", "", "Whole processes (Python start-up and imports included) on this "
-              "machine (2 cores shared with other jobs).", "",
-              "| task | seconds | timed by |", "|---|---|---|"]
+              "machine: 2 cores shared with other jobs, load average "
+              f"{load[0]:.1f} at the start and {load[1]:.1f} at the end, so the wall times are "
+              "those of a crowded machine; `cpu` is user + system seconds (both cores).", "",
+              "| task | wall s | cpu s | timed by |", "|---|---|---|---|"]
         for r in res["speed"]["rows"]:
-            L.append(f"| {r['task']} | {r['seconds']:.1f} | {r['how']} |")
+            L.append(f"| {r['task']} | {r['seconds']:.1f} | {r.get('cpu', float('nan')):.1f} | "
+                     f"{r['how']} |")
         L += ["", "Targets: calibration in seconds, projection under a minute.", ""]
     L += ["![capture](capture.png)", ""]
     with open(path, "w") as fh:

@@ -729,7 +729,9 @@ def path_views():
         d = 1.6 + 0.8 * s
         eye = np.array([d * np.sin(az) * 0.8, -0.3 + 0.4 * s, d * np.cos(az)])
         aim = np.array([0.05 * np.sin(3 * s), 0.04 * s, 0.0])
-        views.append(dict(PATH_CAMERA, matrix_world=look_at(eye, aim, roll_deg=10 * s).tolist()))
+        # "up" along the board's image top (+Y): the camera looks down at the board
+        views.append(dict(PATH_CAMERA, matrix_world=look_at(eye, aim, up=(0, 1, 0),
+                                                            roll_deg=10 * s).tolist()))
     return views
 
 

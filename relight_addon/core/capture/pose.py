@@ -18,9 +18,9 @@ Frames (seed 002 §2.3.3, eq 2.3.3.1):
 The pose: IPPE (the planar solver, both of its solutions tried), then Levenberg-Marquardt
 refinement of the better one on all corners.
 
-Sequences: poses whose rotation or position strays from their neighbours' (median distance to
-the poses within a few frames, far above the sequence's typical value) are rejected, rejected
-and missing frames are filled by slerp between the nearest kept frames, and the path is
+Sequences: poses far from what their neighbours predict (slerp / lerp between the frames on
+either side, far above the sequence's typical error) are rejected, rejected and missing frames
+are filled by slerp between the nearest kept frames, and the path is
 smoothed by a zero-phase exponential filter made of slerps (seed 003's quaternion
 interpolation): a forward pass ``q_i <- slerp(q_{i-1}, q_i, a)`` then the same pass backward.
 """
@@ -37,13 +37,12 @@ BLENDER_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 # A board object may differ from the board's size by this fraction (print scaling, rounding).
 SIZE_TOLERANCE = 0.01
 MIN_POSE_CORNERS = 4
-# Outlier rejection: a pose is rejected when its median distance (rotation angle or position)
-# to the poses within REJECT_WINDOW frames exceeds REJECT_FACTOR times the sequence's median
-# of that distance and the absolute floors below (so a still, noise-free path keeps its poses).
-REJECT_WINDOW = 3
-REJECT_FACTOR = 4.0
+# Outlier rejection: a pose is rejected when it lies further (rotation angle or position) from
+# what its neighbours predict (slerp / lerp between them) than REJECT_FACTOR times the
+# sequence's median of that error and the floors below (a smooth, noise-free path keeps all).
+REJECT_FACTOR = 5.0
 REJECT_FLOOR_DEG = 0.5
-REJECT_FLOOR_REL = 0.005   # of the mean camera-board distance
+REJECT_FLOOR_REL = 0.01    # of the path's spread (its poses around their mean, plus a step)
 
 
 def _cv2():
@@ -193,17 +192,30 @@ def rotation_angle(q0, q1) -> np.ndarray:
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
 
 
-def _neighbour_spread(q, p, idx, window):
-    """Per kept frame, the median rotation angle and position distance to the kept frames
-    within ``window`` frames of it."""
+def _prediction_error(q, p, idx):
+    """Per kept frame, how far its pose lies from what its kept neighbours predict: slerp /
+    lerp half-way between the frames on either side (one and two kept frames away), or
+    extrapolated from the two on one side at the ends; the smaller of the predictions' errors
+    (so that one bad neighbour does not condemn a frame).  (rotation angles, distances)."""
     n = len(idx)
-    ang = np.full(n, np.nan)
-    dist = np.full(n, np.nan)
+    ang = np.full(n, np.inf)
+    dist = np.full(n, np.inf)
     for j in range(n):       # frames of a sequence (hundreds), not elements
-        near = np.flatnonzero((np.abs(idx - idx[j]) <= window) & (np.arange(n) != j))
-        if len(near):
-            ang[j] = np.median(rotation_angle(q[j][None], q[near]))
-            dist[j] = np.median(np.linalg.norm(p[near] - p[j], axis=1))
+        preds = []
+        for k in (1, 2):
+            a, b = j - k, j + k
+            if a >= 0 and b < n:
+                t = (idx[j] - idx[a]) / max(idx[b] - idx[a], 1)
+                preds.append((a, b, t))
+        for a, b in ((j + 1, j + 2), (j - 1, j - 2)):
+            if 0 <= a < n and 0 <= b < n:
+                t = (idx[j] - idx[a]) / (idx[b] - idx[a])     # < 0: extrapolated
+                preds.append((a, b, t))
+        for a, b, t in preds:
+            qp = slerp(q[a][None], q[b][None], t)[0]
+            pp = (1 - t) * p[a] + t * p[b]
+            ang[j] = min(ang[j], float(rotation_angle(q[j], qp)))
+            dist[j] = min(dist[j], float(np.linalg.norm(p[j] - pp)))
     return ang, dist
 
 
@@ -254,10 +266,11 @@ def smooth_path(matrices, valid=None, smoothing: float = 0.5, reject: bool = Tru
     q = quat_from_matrix(m[:, :3, :3])
     p = m[:, :3, 3].copy()
     if reject and len(idx) >= 5:
-        ang, dist = _neighbour_spread(q[idx], p[idx], idx, REJECT_WINDOW)
-        scale = float(np.mean(np.linalg.norm(p[idx], axis=1))) or 1.0
-        lim_a = max(REJECT_FACTOR * np.nanmedian(ang), np.radians(REJECT_FLOOR_DEG))
-        lim_d = max(REJECT_FACTOR * np.nanmedian(dist), REJECT_FLOOR_REL * scale)
+        ang, dist = _prediction_error(q[idx], p[idx], idx)
+        scale = float(np.median(np.linalg.norm(np.diff(p[idx], axis=0), axis=1))) + \
+            float(np.mean(np.linalg.norm(p[idx] - p[idx].mean(axis=0), axis=1)))
+        lim_a = max(REJECT_FACTOR * np.median(ang), np.radians(REJECT_FLOOR_DEG))
+        lim_d = max(REJECT_FACTOR * np.median(dist), REJECT_FLOOR_REL * scale)
         bad = (ang > lim_a) | (dist > lim_d)
         rejected[idx[bad]] = True
         valid &= ~rejected

@@ -12,11 +12,12 @@ Per target mesh (world triangles with UVs and a texture size):
    surface (occlusion edges and silhouettes, a distance transform in texture space); zero when
    the surface faces away (cos < MIN_COS), lies outside the photo, or a triangle of the scene
    lies between it and the camera (a ray cast through ``core.geometry.raycast``'s occluder:
-   Embree, or the bridge's BVHTree).  Near silhouettes a photo pixel mixes the surface with
-   what is beside it, so a sample is dropped where the pixels it reads (its 3 x 3
-   neighbourhood) see another object or a surface nearer than the texel (per-view maps of the
-   first object and distance hit by every photo pixel's ray): a texel takes colours of its
-   own object only, and its weight is the share of its samples kept.  Saturated photo
+   Embree, or the bridge's BVHTree).  Near silhouettes and creases a photo pixel mixes the
+   surface with what is beside it, so a sample is dropped where the pixels it reads (its 3 x 3
+   neighbourhood) see another object, a face of the object turned another way, or a surface
+   nearer than the texel (per-view maps of the triangle and distance hit by every photo
+   pixel's ray): a texel takes colours of its own surface only, and its weight is the share
+   of its samples kept.  Saturated photo
    pixels weigh SATURATED_WEIGHT.
 3. Exposure: a gain per view and channel (the first view fixed at 1) so that views agree where
    they overlap: least squares on the median log ratios of every pair of views over the texels
@@ -51,11 +52,15 @@ RAY_LIFT = 1e-5               # of the scene's size: ray origins off their surfa
 # a pixel of the footprint sees a nearer surface when its distance is below the texel's by
 # this fraction, plus the depth change of a plane seen at the texel's angle over the footprint
 NEARER = 0.03
+SAME_FACING = 0.8             # cos between normals under which a pixel shows another surface
 MAX_SUPERSAMPLE = 4
 GAIN_TEXELS = 200_000         # texels of each mesh used to match the exposures
+FOOTPRINT_TEXELS = 20_000     # texels of each mesh whose footprint sets the supersampling
 GAIN_MIN_TEXELS = 50          # texels two views must share to compare their exposures
 GAIN_DARK = 0.003             # linear values below this are too noisy to compare
 HOLE_NEIGHBOURS = 8
+HOLE_RING = 3                 # texels around the holes whose seen texels are searched
+HOLE_SPARE = 100_000          # and this many others, at random
 HOLE_FACING = 0.5             # cos between normals under which a neighbour weighs 1e-3
 PAD_TEXELS = 4
 
@@ -153,6 +158,7 @@ class _Texels:
         self.size = np.sqrt(area / np.maximum(uv_area * w * h, 1e-300))[self.tri]
         y, x = np.divmod(self.index, w)
         self.uv = np.stack([(x + 0.5) / w, (y + 0.5) / h], axis=1)
+        self.centre = self._points((0.0, 0.0), slice(None))
 
     def __len__(self):
         return len(self.index)
@@ -160,8 +166,13 @@ class _Texels:
     def world(self, offset=(0.0, 0.0), rows=None) -> np.ndarray:
         """World points of the texels (``rows``: some of them) at ``offset`` (in texels) from
         their centres."""
-        h, w = self.shape
         rows = slice(None) if rows is None else rows
+        if offset[0] == 0 and offset[1] == 0 and hasattr(self, "centre"):
+            return self.centre[rows]
+        return self._points(offset, rows)
+
+    def _points(self, offset, rows):
+        h, w = self.shape
         t = self.tri[rows]
         uv = self.uv[rows] + np.array([offset[0] / w, offset[1] / h])
         sr = np.einsum("tij,tj->ti", self._inv[t], uv - self._uv0[t])
@@ -192,73 +203,88 @@ def _sample(image, uv) -> np.ndarray:
     return out.reshape(-1, 3)[:n]
 
 
-def _footprint(view: View, tx: _Texels) -> np.ndarray:
-    """Photo pixels each texel covers in a view where it faces the camera inside the frame
-    (0 elsewhere); no visibility."""
-    pts = tx.world()
+def _footprint(view: View, tx: _Texels, rows) -> np.ndarray:
+    """Photo pixels each texel of ``rows`` covers in a view where it faces the camera inside
+    the frame (0 elsewhere); no visibility."""
+    pts = tx.world(rows=rows)
     h, w = view.image.shape[:2]
     uv, z = _project(view, pts)
     to_cam = view.centre[None] - pts
-    cos = np.einsum("ij,ij->i", tx.normal, to_cam) / np.maximum(np.linalg.norm(to_cam, axis=1), 1e-300)
+    cos = np.einsum("ij,ij->i", tx.normal[rows], to_cam) / np.maximum(
+        np.linalg.norm(to_cam, axis=1), 1e-300)
     f = 0.5 * (view.K[0, 0] + view.K[1, 1])
-    ppt = (f * tx.size / np.where(z > 1e-9, z, np.inf)) ** 2 * np.clip(cos, 0, 1)   # 0 behind
+    ppt = (f * tx.size[rows] / np.where(z > 1e-9, z, np.inf)) ** 2 * np.clip(cos, 0, 1)
     inside = (z > 0) & (cos > MIN_COS) & (uv[:, 0] > -0.5) & (uv[:, 0] < w - 0.5) \
         & (uv[:, 1] > -0.5) & (uv[:, 1] < h - 0.5)
     return np.where(inside, ppt, 0.0)
 
 
 class _ViewMaps:
-    """What every pixel of a photo sees: the object (index, -1 for nothing) and the distance
-    of the first hit along its ray, and their min / max over windows (computed on demand)."""
+    """What every pixel of a photo sees, from the first hit of its ray, kept in 11 bytes a
+    pixel: ``owner`` the object's index where the pixel's 3 x 3 neighbourhood sees that one
+    object on faces turned alike (cos between its normals > SAME_FACING), else -2 (an edge,
+    a crease, or nothing hit); ``depth`` the smallest distance over the neighbourhood;
+    ``normal`` the pixel's surface normal (int8, / 127)."""
 
-    def __init__(self, view: View, occluder, owner):
+    def __init__(self, view: View, occluder, surfaces):
         import cv2  # noqa: PLC0415
-        self._cv2 = cv2
         h, w = view.image.shape[:2]
         yy, xx = np.mgrid[0:h, 0:w]
         pix = np.stack([xx.ravel(), yy.ravel(), np.ones(h * w)], axis=1).astype(np.float64)
-        rays = pix @ np.linalg.inv(np.asarray(view.K, np.float64)).T @ np.asarray(view.R)
+        rays = pix @ (np.linalg.inv(np.asarray(view.K, np.float64)).T @ np.asarray(view.R))
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         t, prim = occluder.first_hit(np.broadcast_to(view.centre, rays.shape), rays)
-        ids = np.where(prim >= 0, owner[np.maximum(prim, 0)], -1)
-        self.ids = ids.reshape(h, w).astype(np.int16 if owner.max(initial=0) < 32000 else np.int32)
-        self.depth = np.where(np.isfinite(t), t, 3e38).reshape(h, w).astype(np.float32)
-        self._filtered = {}
-
-    def filtered(self, radius):
-        """(min id, max id, min distance) over the (2r + 1)^2 window of every pixel."""
-        if radius not in self._filtered:
-            cv2 = self._cv2
-            k = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
-            ids = self.ids if self.ids.dtype == np.int16 else self.ids.astype(np.float32)
-            self._filtered[radius] = (cv2.erode(ids, k, borderType=cv2.BORDER_REPLICATE),
-                                      cv2.dilate(ids, k, borderType=cv2.BORDER_REPLICATE),
-                                      cv2.erode(self.depth, k, borderType=cv2.BORDER_REPLICATE))
-        return self._filtered[radius]
+        del rays, pix
+        owner = surfaces.owner[prim].reshape(h, w).astype(np.float32)     # exact below 2^24
+        normal = surfaces.normal[prim].reshape(h, w, 3).astype(np.float32)
+        depth = np.where(np.isfinite(t), t, 3e38).reshape(h, w).astype(np.float32)
+        del t, prim
+        k = np.ones((3, 3), np.uint8)
+        border = cv2.BORDER_REPLICATE
+        same = cv2.erode(owner, k, borderType=border) == cv2.dilate(owner, k, borderType=border)
+        pad = np.pad(normal, ((1, 1), (1, 1), (0, 0)), mode="edge")
+        for dy in (0, 1, 2):
+            for dx in (0, 1, 2):
+                if dy != 1 or dx != 1:
+                    same &= np.einsum("hwc,hwc->hw", pad[dy:dy + h, dx:dx + w], normal) > SAME_FACING
+        self.owner = np.where(same & (owner >= 0), owner, -2.0).astype(np.float32)
+        self.depth = cv2.erode(depth, k, borderType=border)
+        self.normal = np.rint(normal * 127).astype(np.int8)
 
     def release(self):
-        """Forget the filtered maps (8 bytes a pixel each radius)."""
-        self._filtered.clear()
+        """(Nothing derived is kept between targets.)"""
 
 
-def _clean(maps, own, uv, dist, cos, f):
+class _Surfaces:
+    """Per scene triangle: its object's index and its unit normal (for the clean test)."""
+
+    def __init__(self, owner, triangles):
+        n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        self.owner = np.append(np.asarray(owner, np.int64), -1)        # index -1: nothing hit
+        self.normal = np.vstack([n / np.maximum(norm, 1e-300), np.zeros((1, 3))])
+
+
+def _clean(maps, own, uv, dist, cos, normal, f):
     """Whether the pixels a bilinear sample at ``uv`` reads (its 3 x 3 neighbourhood) see the
-    object ``own`` and nothing nearer than ``dist`` (less NEARER and the depth change of a
-    plane at this angle over the window)."""
-    lo, hi, near = maps.filtered(1)
-    h, w = lo.shape
-    px = np.clip(np.rint(uv).astype(np.int64), 0, [w - 1, h - 1])
-    a, b = px[:, 1], px[:, 0]
+    object ``own`` on a surface facing as the texel's (a crease of the object is an edge too)
+    and nothing nearer than ``dist`` (less NEARER and the depth change of a plane at this
+    angle over the window)."""
+    h, w = maps.owner.shape
+    x = np.clip(np.rint(uv[:, 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(uv[:, 1]).astype(np.int64), 0, h - 1)
     tan = np.sqrt(np.maximum(1.0 - cos ** 2, 0.0)) / np.maximum(cos, MIN_COS)
-    tol = NEARER + 3.0 * tan / f
-    return (lo[a, b] == own) & (hi[a, b] == own) & (near[a, b] >= dist * (1.0 - tol))
+    floor = dist * (1.0 - (NEARER + 3.0 * tan / f))
+    facing = np.einsum("ij,ij->i", maps.normal[y, x].astype(np.float64), normal) / 127.0
+    return (maps.owner[y, x] == own) & (maps.depth[y, x] >= floor) & (facing > SAME_FACING)
 
 
-def _quality(view: View, tx: _Texels, occluder, lift, own, maps, rows=None, clean_centre=True):
+def _quality(view: View, tx: _Texels, occluder, lift, own, maps, surfaces=None, rows=None,
+             clean_centre=True):
     """(q (n,), pixel coordinates (n, 2), pixels a texel covers (n,), distance (n,), cos (n,))
     of texels in a view, q = 0 where the view does not see them (edge feathering not
     included; with ``clean_centre``, also where the texel centre's sample is not clean)."""
-    idx = np.arange(len(tx)) if rows is None else rows
+    idx = slice(None) if rows is None else rows           # all texels: views, no copies
     pts = tx.world(rows=idx)
     nrm = tx.normal[idx]
     h, w = view.image.shape[:2]
@@ -272,10 +298,10 @@ def _quality(view: View, tx: _Texels, occluder, lift, own, maps, rows=None, clea
     edge = np.minimum(np.minimum(uv[:, 0] + 0.5, w - 0.5 - uv[:, 0]),
                       np.minimum(uv[:, 1] + 0.5, h - 0.5 - uv[:, 1]))
     ok = (z > 0) & (cos > MIN_COS) & (edge > 0) & np.isfinite(uv).all(axis=1)
-    q = np.zeros(len(idx))
+    q = np.zeros(len(pts))
     sel = np.flatnonzero(ok)
     if len(sel) and clean_centre:
-        sel = sel[_clean(maps, own, uv[sel], dist[sel], cos[sel], f)]
+        sel = sel[_clean(maps, own, uv[sel], dist[sel], cos[sel], nrm[sel], f)]
     if len(sel):
         start = pts[sel] + lift * nrm[sel]
         hidden = occluder.segments_occluded(start, np.broadcast_to(view.centre, start.shape),
@@ -299,7 +325,7 @@ def _edge_ramp(tx: _Texels, seen_rows) -> np.ndarray:
     return np.clip(dist[tx.index] / EDGE_FEATHER, 0.0, 1.0)
 
 
-def _gains(views, texel_sets, occluder, lift, owners, maps, rng):
+def _gains(views, texel_sets, occluder, lift, owners, maps, surfaces, rng):
     """Per view (3,) gains making overlapping views agree; the first view's is 1."""
     nv = len(views)
     logs = [[] for _ in range(nv)]          # per view: (texel key, log colour (3,))
@@ -313,7 +339,7 @@ def _gains(views, texel_sets, occluder, lift, owners, maps, rng):
         vm = maps(v)
         for m, tx in enumerate(texel_sets):
             rows = rows_of[m]
-            q, uv, *_ = _quality(view, tx, occluder, lift, owners[m], vm, rows=rows)
+            q, uv, *_ = _quality(view, tx, occluder, lift, owners[m], vm, surfaces, rows=rows)
             good = q > 0.05
             if not good.any():
                 continue
@@ -356,22 +382,35 @@ def _gains(views, texel_sets, occluder, lift, owners, maps, rng):
     return gains
 
 
-def _fill_holes(tx: _Texels, colour, seen):
-    """Colours of unseen texels from the nearest seen texels of the mesh in 3D."""
+def _fill_holes(tx: _Texels, colour, seen, rng):
+    """Colours of unseen texels from the nearest seen texels of the mesh in 3D.  The seen
+    texels searched: those within HOLE_RING texels of a hole in the texture (where a hole's
+    nearest ones almost always are) and a random HOLE_SPARE of the others (holes that fill a
+    whole chart)."""
+    import cv2  # noqa: PLC0415
     from scipy.spatial import cKDTree  # noqa: PLC0415
     holes = np.flatnonzero(~seen)
     if len(holes) == 0 or not seen.any():
         return colour
+    h, w = tx.shape
+    mask = np.zeros(h * w, np.uint8)
+    mask[tx.index[holes]] = 1
+    k = np.ones((2 * HOLE_RING + 1, 2 * HOLE_RING + 1), np.uint8)
+    ring = cv2.dilate(mask.reshape(h, w), k).reshape(-1).astype(bool)[tx.index] & seen
+    src = np.flatnonzero(ring)
+    rest = np.flatnonzero(seen & ~ring)
+    if len(rest) > HOLE_SPARE:
+        rest = rng.choice(rest, HOLE_SPARE, replace=False)
+    src = np.concatenate([src, rest])
     pts = tx.world()
-    src = np.flatnonzero(seen)
     tree = cKDTree(pts[src])
-    k = min(HOLE_NEIGHBOURS, len(src))
-    d, j = tree.query(pts[holes], k=k)
-    d, j = d.reshape(len(holes), k), j.reshape(len(holes), k)
+    kk = min(HOLE_NEIGHBOURS, len(src))
+    d, j = tree.query(pts[holes], k=kk)
+    d, j = d.reshape(len(holes), kk), j.reshape(len(holes), kk)
     facing = np.einsum("hd,hkd->hk", tx.normal[holes], tx.normal[src][j])
-    w = np.where(facing > HOLE_FACING, 1.0, 1e-3) / np.maximum(d, 1e-9) ** 2
+    wgt = np.where(facing > HOLE_FACING, 1.0, 1e-3) / np.maximum(d, 1e-9) ** 2
     out = colour.copy()
-    out[holes] = np.einsum("hk,hkc->hc", w, colour[src][j]) / w.sum(axis=1, keepdims=True)
+    out[holes] = np.einsum("hk,hkc->hc", wgt, colour[src][j]) / wgt.sum(axis=1, keepdims=True)
     return out
 
 
@@ -413,11 +452,12 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
         if progress is not None:
             progress(min(1.0, done / steps))
 
+    surfaces = _Surfaces(owner, tris)
     cache = {}
 
     def maps(v):
         if v not in cache:
-            cache[v] = _ViewMaps(views[v], occluder, owner)
+            cache[v] = _ViewMaps(views[v], occluder, surfaces)
             tick()
         return cache[v]
 
@@ -426,15 +466,18 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
     samples_of = []
     for tx in texel_sets:
         s = supersample
-        if s is None:
-            best = np.zeros(len(tx))
+        if s is None:              # on a sample of the texels: a median needs no more
+            rows = np.arange(len(tx))
+            if len(rows) > FOOTPRINT_TEXELS:
+                rows = np.sort(rng.choice(len(rows), FOOTPRINT_TEXELS, replace=False))
+            best = np.zeros(len(rows))
             for view in views:
-                best = np.maximum(best, _footprint(view, tx))
+                best = np.maximum(best, _footprint(view, tx, rows))
             seen_ppt = best[best > 0]
             s = int(np.clip(np.floor(np.sqrt(np.median(seen_ppt))) if len(seen_ppt) else 1,
                             1, MAX_SUPERSAMPLE))
         samples_of.append(int(s))
-    gains = (_gains(views, texel_sets, occluder, lift, own, maps, rng) if match_exposure
+    gains = (_gains(views, texel_sets, occluder, lift, own, maps, surfaces, rng) if match_exposure
              else np.ones((len(views), 3)))
     used = np.zeros(len(views), bool)
     acc = [(np.zeros((len(tx), 3)), np.zeros(len(tx)), []) for tx in texel_sets]
@@ -445,7 +488,7 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
             s = samples_of[m]
             offsets = [((i + 0.5) / s - 0.5, (j + 0.5) / s - 0.5)
                        for i in range(s) for j in range(s)]
-            q, _, _, dist, cos = _quality(view, tx, occluder, lift, own[m], vm,
+            q, _, _, dist, cos = _quality(view, tx, occluder, lift, own[m], vm, surfaces,
                                           clean_centre=False)
             rows = np.flatnonzero(q > 0)
             tick()
@@ -458,7 +501,7 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
             sat = np.zeros(len(rows), bool)
             for off in offsets:           # s * s sub-texel points (at most 16)
                 uv, _ = _project(view, tx.world(off, rows))
-                ok = _clean(vm, own[m], uv, dist[rows], cos[rows], f)
+                ok = _clean(vm, own[m], uv, dist[rows], cos[rows], tx.normal[rows], f)
                 c = _sample(view.image, uv)
                 sat |= ok & (c.max(axis=1) >= SATURATED)
                 colour += np.where(ok[:, None], c, 0.0)
@@ -485,7 +528,7 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
         seen = den > 0
         colour = num / np.maximum(den, 1e-300)[:, None]
         if fill_holes:
-            colour = _fill_holes(tx, colour, seen)
+            colour = _fill_holes(tx, colour, seen, rng)
         h, w = tx.shape
         tex = np.zeros((h * w, 3), np.float32)
         tex[tx.index] = colour
