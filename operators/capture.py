@@ -573,8 +573,10 @@ class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
     bl_label = "Project Photos"
     bl_options = {'REGISTER', 'UNDO'}
 
-    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384,
-                              description="Width and height of each mesh's new texture")
+    texture_size: IntProperty(name="Texture Size", default=0, min=0, max=16384,
+                              description="Width and height of each mesh's new texture (0: "
+                                          "about one texel a photo pixel where the photos see "
+                                          "the mesh best, 64-4096)")
     uv_map: StringProperty(name="UV Map", default="",
                            description="UV map to texture (empty: the active render one)")
     match_exposure: BoolProperty(name="Match Exposure", default=True,
@@ -667,11 +669,13 @@ class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
                 obj.data.update()
         depsgraph = context.evaluated_depsgraph_get()
         targets = []
+        sizes = []
         for obj in meshes:
             uv = bridge.uv_layer_name(obj, self.uv_map) or UV_NAME
             tris, uvs = bridge.mesh_triangles(obj, depsgraph, uv)
-            targets.append(projection.Target(obj.name, tris, uvs,
-                                             (self.texture_size, self.texture_size)))
+            n = self.texture_size or projection.suggest_texture_size(tris, uvs, views)
+            sizes.append(n)
+            targets.append(projection.Target(obj.name, tris, uvs, (n, n)))
         wm = context.window_manager
         wm.progress_begin(0, 100)
         try:
@@ -687,7 +691,8 @@ class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
         for obj, res in zip(meshes, result.meshes):
             img = bridge.image_from_texture(f"{obj.name} Photo", res.texture)
             bridge.photo_material(obj, img, bridge.uv_layer_name(obj, self.uv_map) or UV_NAME)
-        extra = ""
+        extra = (f"; textures of {min(sizes)}" + (f"-{max(sizes)}" if max(sizes) > min(sizes) else "")
+                 + " texels a side")
         if atlases:
             extra += f"; {len(atlases)} meshes unwrapped by xatlas"
         if skipped:
@@ -731,7 +736,8 @@ class RelightCaptureSettings(bpy.types.PropertyGroup):
     hdr_output: StringProperty(name="HDR Output", subtype="FILE_PATH", default="//merged.exr",
                                description="OpenEXR to write")
     environment: EnumProperty(name="Result", items=ENVIRONMENT_ITEMS, default="NONE")
-    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
+    texture_size: IntProperty(name="Texture Size", default=0, min=0, max=16384,
+                              description="0: about one texel a photo pixel")
 
 
 BOARD_ARGS = ("squares_x", "squares_y", "square_length", "marker_length", "dictionary")

@@ -152,3 +152,13 @@ def test_project_photos_bad_input(photos, tmp_path):
     with pytest.raises(RuntimeError, match="Select the meshes to texture"):
         bpy.ops.relight.project_photos(texture_size=32)
     assert _state(scene) == state
+
+
+def test_automatic_texture_size(photos):
+    """texture_size=0: about one texel a photo pixel where a camera sees the floor best; the
+    nearest camera is ~2.9 m from the floor's centre with f = 213 px (24 mm on 36 mm at 320 px),
+    about 1.2-1.4 cm a pixel on the floor seen at 45-50 degrees: 2 m / 1.3 cm ~ 150 texels."""
+    scene, floor, box, cams, bridge = _setup(photos)
+    bpy.ops.relight.project_photos()
+    tex, _ = _texture(floor)
+    assert 128 <= tex.shape[0] <= 256 and tex.shape[0] == tex.shape[1]
