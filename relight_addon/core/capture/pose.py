@@ -194,9 +194,10 @@ def rotation_angle(q0, q1) -> np.ndarray:
 
 def _prediction_error(q, p, idx):
     """Per kept frame, how far its pose lies from what its kept neighbours predict: slerp /
-    lerp half-way between the frames on either side (one and two kept frames away), or
-    extrapolated from the two on one side at the ends; the smaller of the predictions' errors
-    (so that one bad neighbour does not condemn a frame).  (rotation angles, distances)."""
+    lerp between the frames on either side (one and two kept frames away), or extrapolated
+    from the two on one side; the smallest of the predictions' errors, each scaled to the
+    noise of a half-way prediction (so that one bad neighbour does not condemn a frame, nor
+    its place at an end).  (rotation angles, distances)."""
     n = len(idx)
     ang = np.full(n, np.inf)
     dist = np.full(n, np.inf)
@@ -214,8 +215,11 @@ def _prediction_error(q, p, idx):
         for a, b, t in preds:
             qp = slerp(q[a][None], q[b][None], t)[0]
             pp = (1 - t) * p[a] + t * p[b]
-            ang[j] = min(ang[j], float(rotation_angle(q[j], qp)))
-            dist[j] = min(dist[j], float(np.linalg.norm(p[j] - pp)))
+            # in units of a half-way prediction's noise: an extrapolation (t = -1) carries
+            # twice the noise of its two poses' (variance 1 + (1-t)^2 + t^2 against 1.5)
+            amp = np.sqrt((1.0 + (1.0 - t) ** 2 + t ** 2) / 1.5)
+            ang[j] = min(ang[j], float(rotation_angle(q[j], qp)) / amp)
+            dist[j] = min(dist[j], float(np.linalg.norm(p[j] - pp)) / amp)
     return ang, dist
 
 
