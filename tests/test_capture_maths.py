@@ -11,7 +11,6 @@
   placed as the issue says give back the camera's matrix_world.
 * Slerp against scipy's ``Slerp``; the path smoother on a noisy synthetic path with outliers.
 """
-import os
 
 import numpy as np
 import pytest

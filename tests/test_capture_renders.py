@@ -8,7 +8,6 @@ error <= 2 mm at 1, 2 and 3 m.  Slow on a cold cache (72 calibration renders of 
 12 pose renders of 1280 x 960, about 8 minutes of one core); seconds once cached.
 """
 import copy
-import importlib
 import os
 
 import numpy as np

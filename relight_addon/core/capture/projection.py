@@ -10,25 +10,22 @@ Per target mesh (world triangles with UVs and a texture size):
    texel covers (resolution and distance), ``border`` a ramp over the photo's outer
    BORDER_FEATHER, ``edge`` a ramp over EDGE_FEATHER texels from where the view stops seeing the
    surface (occlusion edges and silhouettes, a distance transform in texture space); zero when
-   the surface faces away (cos < MIN_COS), lies outside the photo, or a triangle of the scene
-   lies between it and the camera: every photo pixel's ray is cast through
-   ``core.geometry.raycast``'s occluder (Embree, or the bridge's BVHTree) and its first hit
-   (triangle, distance) kept in a per-view map; a texel's sample counts only where its pixels'
-   first hits are the texel's own surface at its distance, and a segment cast from the texel
-   to the camera meets nothing (``exact_visibility``, on by default).  Near silhouettes and creases a photo pixel mixes the
-   surface with what is beside it, so a sample is dropped where the pixels it reads (its 3 x 3
-   neighbourhood) see another object, a face of the object turned another way, or a surface
-   nearer than the texel (per-view maps of the triangle and distance hit by every photo
-   pixel's ray): a texel takes colours of its own surface only, and its weight is the share
-   of its samples kept.  Saturated photo
-   pixels weigh SATURATED_WEIGHT.
+   the surface faces away (cos < MIN_COS), lies outside the photo, or is hidden.
+   Visibility is ray cast through ``core.geometry.raycast``'s occluder (Embree, or the
+   bridge's BVHTree): a segment from each texel to each camera (``exact_visibility``), and the
+   first hit (triangle, distance) of every photo pixel's ray, kept in a per-view map.  Near
+   silhouettes and creases a photo pixel mixes the surface with what is beside it, so a
+   sample is dropped where the pixels it reads (its 3 x 3 neighbourhood) see another object,
+   a face of the object turned another way, or a surface nearer than the texel: a texel takes
+   colours of its own surface only, and its weight is the share of its samples kept.
+   Saturated photo pixels weigh SATURATED_WEIGHT.
 3. Exposure: a gain per view and channel (the first view fixed at 1) so that views agree where
    they overlap: least squares on the median log ratios of every pair of views over the texels
    both see well.
 4. Blend: ``sum_v w_v g_v c_v / sum_v w_v`` with ``w_v = q_v ** SHARPNESS``: the best view
    dominates, a view about as good blends in, and the ramps above remove seams where a view
-   starts or stops.  Colours are sampled bilinearly at SUPERSAMPLE x SUPERSAMPLE points of the
-   texel (more where a texel covers many photo pixels: the photo's noise averages out).
+   starts or stops.  Colours are sampled bilinearly at s x s points of the texel, s growing
+   (to MAX_SUPERSAMPLE) with the photo pixels a texel covers: the photo's noise averages out.
 5. Holes (texels no view sees): reported, and filled from the nearest seen texels of the same
    mesh in 3D (inverse square distance, surfaces facing another way weighed down), so a texel
    hidden from every camera never takes an occluder's colour; then seam padding
@@ -271,9 +268,6 @@ class _ViewMaps:
         self.depth = cv2.erode(depth, k, borderType=border)
         self.normal = np.rint(normal * 127).astype(np.int8)
 
-    def release(self):
-        """(Nothing derived is kept between targets.)"""
-
 
 class _Surfaces:
     """Per scene triangle: its object's index and its unit normal (for the clean test)."""
@@ -300,8 +294,8 @@ def _clean(maps, own, uv, dist, cos, normal, f):
     return (maps.owner[y, x] == own) & (maps.depth[y, x] >= floor) & (facing > SAME_FACING)
 
 
-def _quality(view: View, tx: _Texels, occluder, lift, own, maps, surfaces=None, rows=None,
-             clean_centre=True, segments=False):
+def _quality(view: View, tx: _Texels, occluder, lift, own, maps, rows=None, clean_centre=True,
+             segments=False):
     """(q (n,), pixel coordinates (n, 2), pixels a texel covers (n,), distance (n,), cos (n,))
     of texels in a view, q = 0 where the view does not see them (edge feathering not
     included; with ``clean_centre``, also where the texel centre's sample is not clean)."""
@@ -348,7 +342,7 @@ def _edge_ramp(tx: _Texels, seen_rows) -> np.ndarray:
     return np.clip(dist[tx.index] / EDGE_FEATHER, 0.0, 1.0)
 
 
-def _gains(views, texel_sets, occluder, lift, owners, maps, surfaces, rng):
+def _gains(views, texel_sets, occluder, lift, owners, maps, rng):
     """Per view (3,) gains making overlapping views agree; the first view's is 1."""
     nv = len(views)
     logs = [[] for _ in range(nv)]          # per view: (texel key, log colour (3,))
@@ -362,7 +356,7 @@ def _gains(views, texel_sets, occluder, lift, owners, maps, surfaces, rng):
         vm = maps(v)
         for m, tx in enumerate(texel_sets):
             rows = rows_of[m]
-            q, uv, *_ = _quality(view, tx, occluder, lift, owners[m], vm, surfaces, rows=rows)
+            q, uv, *_ = _quality(view, tx, occluder, lift, owners[m], vm, rows=rows)
             good = q > 0.05
             if not good.any():
                 continue
@@ -370,7 +364,6 @@ def _gains(views, texel_sets, occluder, lift, owners, maps, surfaces, rng):
             ok = (c.min(axis=1) > GAIN_DARK) & (c.max(axis=1) < SATURATED)
             keys = rows[good][ok] + (m << 40)
             logs[v].append((keys, np.log(c[ok])))
-        vm.release()
     per = [(np.concatenate([k for k, _ in L]), np.concatenate([c for _, c in L])) if L else
            (np.zeros(0, np.int64), np.zeros((0, 3))) for L in logs]
     eqs, rhs, wts = [], [], []
@@ -540,7 +533,7 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
             s = int(np.clip(np.floor(np.sqrt(np.median(seen_ppt))) if len(seen_ppt) else 1,
                             1, MAX_SUPERSAMPLE))
         samples_of.append(int(s))
-    gains = (_gains(views, texel_sets, occluder, lift, own, maps, surfaces, rng) if match_exposure
+    gains = (_gains(views, texel_sets, occluder, lift, own, maps, rng) if match_exposure
              else np.ones((len(views), 3)))
     used = np.zeros(len(views), bool)
     acc = [(np.zeros((len(tx), 3)), np.zeros(len(tx)), []) for tx in texel_sets]
@@ -551,7 +544,7 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
             s = samples_of[m]
             offsets = [((i + 0.5) / s - 0.5, (j + 0.5) / s - 0.5)
                        for i in range(s) for j in range(s)]
-            q, uv_all, _, dist, cos = _quality(view, tx, occluder, lift, own[m], vm, surfaces,
+            q, uv_all, _, dist, cos = _quality(view, tx, occluder, lift, own[m], vm,
                                                clean_centre=False, segments=exact_visibility)
             rows = np.flatnonzero(q > 0)
             tick()
@@ -593,7 +586,6 @@ def project(targets, views, scene_triangles, owners=None, supersample=None,
             wgt = qq ** SHARPNESS * np.where(sat, SATURATED_WEIGHT, 1.0)
             num[rows] += wgt[:, None] * colour * gains[v]
             den[rows] += wgt
-        vm.release()
     meshes, samples_used = [], {}
     for m, (target, tx) in enumerate(zip(targets, texel_sets)):
         num, den, names_used = acc[m]
