@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies, eevee, lamps, precompute, settings, settle, unwrap
+from . import capture, dependencies, eevee, lamps, precompute, settings, settle, unwrap
 
-_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle)
+_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle, capture)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
@@ -24,9 +24,11 @@ def register():
     _register()
     settings.attach()
     settle.attach()
+    capture.attach()
 
 
 def unregister():
+    capture.detach()
     settle.detach()
     settings.detach()
     _unregister()

@@ -3,9 +3,10 @@
 
 import bpy
 
-from . import main
+from . import capture, main
 
-_modules = (main,)
+# the main panel first: the Capture sub-panel names it as its parent
+_modules = (main, capture)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
