@@ -189,13 +189,20 @@ def main(argv=None):
     lines += ["", f"Precompute {statistics.median(m['precompute_s'] for m in made):.1f} s.  "
               f"File size (uncompressed): {m0['size_bare_mb']:.1f} MB without the kept "
               f"solution, {m0['size_kept_mb']:.1f} MB with it (+{m0['kept_mb']:.1f} MB)."]
+    path = os.path.join(RESULTS, "reopen.md")
     if not args.no_scan:
         faces, mb, pack_s, unpack_s = scan_kept()
         lines += ["", f"A {faces:,}-face scan (family room 0, medium, solved on its proxy): the "
                   f"kept solution is {mb:.1f} MB (packed in {pack_s:.2f} s, read back in "
-                  f"{unpack_s:.2f} s)."]
+                  f"{unpack_s:.2f} s), load average {os.getloadavg()[0]:.1f}."]
+    elif os.path.exists(path):
+        # --no-scan keeps the scan's line of the run that measured it
+        with open(path) as fh:
+            kept = [ln for ln in fh.read().splitlines() if ln.startswith("A ") and "scan" in ln]
+        lines += ["", *(ln + (" (an earlier run)" if "earlier run" not in ln else "")
+                         for ln in kept)]
     os.makedirs(RESULTS, exist_ok=True)
-    with open(os.path.join(RESULTS, "reopen.md"), "w") as fh:
+    with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 
