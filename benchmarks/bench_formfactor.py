@@ -1,6 +1,6 @@
 """Accuracy and cost of the unoccluded form factors (relight_addon.core.geometry.formfactor).
 
-* patch_to_patch for m = 1..8 on the 50 random facing rectangle pairs of tests/test_formfactor.py
+* patch_to_patch for m = 1..8 on the 50 random facing rectangle pairs of tests/helpers/formfactors.py
   (reference: pyviewfactor), and on the 20 straddling pairs (reference: brute-force double
   integration over the mutually visible parts): mean / max relative error, microseconds per pair.
 * raw point_to_polygon throughput (million point-polygon evaluations per second).
@@ -28,7 +28,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 
 def _load_tests():
-    spec = importlib.util.spec_from_file_location("test_formfactor", ROOT / "tests" / "test_formfactor.py")
+    spec = importlib.util.spec_from_file_location("formfactors", ROOT / "tests" / "helpers" / "formfactors.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -108,7 +108,7 @@ def write_results(rows, thr):
         "",
         "## patch_to_patch: m x m Gauss points on the receiver, exact contour integral over the source",
         "",
-        "Facing pairs: the 50 random rectangle pairs of `tests/test_formfactor.py::facing_pairs` "
+        "Facing pairs: the 50 random rectangle pairs of `tests/helpers/formfactors.py::facing_pairs` "
         "(wholly in front of each other), reference pyviewfactor 1.1 (double contour integral). "
         "Straddling pairs: 20 pairs where the source crosses the receiver's plane "
         "(`straddling_pairs`), reference brute-force double Gauss integration over the mutually "

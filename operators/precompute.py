@@ -61,7 +61,7 @@ class SolveJob:
         self._thread.join(timeout)
         return not self._thread.is_alive()
 
-    def _progress(self, fraction, message):
+    def progress(self, fraction, message):
         from ..relight_addon.core.progress import Cancelled
         if self._cancel.is_set():
             raise Cancelled("cancelled by the user")
@@ -71,7 +71,7 @@ class SolveJob:
     def _run(self):
         from ..relight_addon.core.progress import Cancelled
         try:
-            self.result = self.job.compute(progress=self._progress)
+            self.result = self.job.compute(progress=self.progress)
             self.state = "cancelled" if self._cancel.is_set() else "done"
         except Cancelled:
             self.state = "cancelled"
@@ -98,7 +98,7 @@ def _release_when_stopped():
     return None
 
 
-def _busy_reason():
+def busy_reason():
     job = _ACTIVE["job"]
     if job is None or not job.alive:
         return None
@@ -126,7 +126,7 @@ class _PipelineRunner(RelightOperator):
 
     @classmethod
     def disabled_reason(cls, context):
-        return _busy_reason()
+        return busy_reason()
 
     def _prepare(self, context, preset=None, correction=None):
         pipeline = _pipeline()
@@ -312,7 +312,7 @@ class RELIGHT_OT_clear(RelightOperator, bpy.types.Operator):
 
     @classmethod
     def disabled_reason(cls, context):
-        reason = _busy_reason()
+        reason = busy_reason()
         if reason:
             return reason
         from ..relight_addon.blender import state, write

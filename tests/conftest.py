@@ -4,6 +4,8 @@ import os
 import shutil
 import sys
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
@@ -23,6 +25,33 @@ def pytest_configure(config):
     # `make test-quick` runs `-m "not slow"`: what a developer runs between edits (< 5 min)
     config.addinivalue_line("markers", "slow: Cycles bakes and renders, scans, EEVEE, long "
                                        "solves (left out of `make test-quick`)")
+
+
+@pytest.fixture
+def test_room():
+    """The suite's test room (helpers.room) in a factory-empty file, the add-on registered and
+    its preset at draft; not precomputed."""
+    bpy = pytest.importorskip("bpy")
+    from helpers.blender import addon
+    from helpers.room import build_scene
+    addon()
+    build_scene()
+    bpy.context.scene.relight.preset = "draft"
+    return bpy.context.scene
+
+
+@pytest.fixture
+def count_solves(monkeypatch):
+    """``solves = count_solves()``: from then on ``solves`` gets an entry for each new solve of
+    the room (the pipeline's ``solve``; an Update that keeps the room adds none)."""
+    def start():
+        from helpers.blender import addon_module
+        pipeline = addon_module("relight_addon.blender.pipeline")
+        solves = []
+        solve = pipeline.solve
+        monkeypatch.setattr(pipeline, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
+        return solves
+    return start
 
 
 def pytest_collection_modifyitems(session, config, items):

@@ -56,6 +56,7 @@ def cornell_reference():
     return scene, ref, err
 
 
+@pytest.mark.slow
 def test_cornell_box_patch_radiosity_matches_mitsuba(cornell_reference):
     """High within 1 % on average and 3 % on the worst patch channel, and no bias: before the
     floor under the boxes counted twice (radiosity.exposure) and sources were spread over their
@@ -76,6 +77,7 @@ def test_cornell_box_patch_radiosity_matches_mitsuba(cornell_reference):
     assert np.all(np.isfinite(ours))
 
 
+@pytest.mark.slow
 def test_cornell_box_medium_is_stable_over_seeds(cornell_reference):
     """The medium preset gives the same quality whatever the random seed (issue 10): before the
     oracle re-tested large links its few rays called unoccluded, a block face came out 14 % dark

@@ -262,7 +262,7 @@ def test_camera_from_marker_movie(tmp_path):
 
 def _fcurves(obj):
     bridge = importlib.import_module("relight_ext.relight_addon.blender.capture")
-    return bridge._fcurves(obj, obj.animation_data.action)
+    return bridge.fcurves(obj, obj.animation_data.action)
 
 
 def test_camera_from_marker_bad_input(tmp_path):

@@ -1,29 +1,24 @@
 """Closed objects (issue 44: 2, 3), through the operators on the test room of
-``test_precompute_operator`` at draft: a box modelled inside out is relit as the same box with
+``helpers.room`` at draft: a box modelled inside out is relit as the same box with
 outward normals (its faces turned to the side the photo shows), and a lamp inside a closed box
 lights the box's inside only, which the photo does not show.
 
 Truth: the same scene with the box's normals outward (what Cycles renders either way: its
 diffuse faces are two-sided) and physics (light inside a closed box does not reach its
 outside)."""
-import os
-import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_data_safety import _module  # noqa: E402
-from test_edge_values import _relit  # noqa: E402
-from test_precompute_operator import build_scene  # noqa: E402
+from helpers.blender import addon_module, relit_now  # noqa: E402
+from helpers.room import build_scene  # noqa: E402
 
 
 def _room(inside_out=False):
     import bmesh
-    _module("operators")
+    addon_module("operators")
     build_scene()
     if inside_out:
         me = bpy.data.objects["Box"].data
@@ -38,7 +33,7 @@ def _room(inside_out=False):
 
 def _box_and_floor():
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    return {n: _relit(n) for n in ("Box", "Floor", "WallXn")}
+    return {n: relit_now(n) for n in ("Box", "Floor", "WallXn")}
 
 
 def test_a_box_modelled_inside_out_is_relit_as_the_box():
@@ -52,7 +47,7 @@ def test_a_box_modelled_inside_out_is_relit_as_the_box():
         np.testing.assert_allclose(inward[name], outward[name], rtol=0.02, atol=1e-3)
     # and each lamp still lights it: switching one off darkens the box
     bpy.data.lights["LampA"].energy = 0.0
-    assert _relit("Box").mean() < 0.8 * inward["Box"].mean()
+    assert relit_now("Box").mean() < 0.8 * inward["Box"].mean()
 
 
 def test_a_lamp_inside_a_closed_box_does_not_light_its_outside():
@@ -72,8 +67,8 @@ def test_a_lamp_inside_a_closed_box_does_not_light_its_outside():
     with_lamp = _box_and_floor()
     on = with_lamp["Box"].mean()
     light.energy = 0.0
-    off = _relit("Box").mean()
+    off = relit_now("Box").mean()
     assert off > 0.8 * on, (on, off)
     assert off == pytest.approx(without["Box"].mean(), rel=0.03)
-    st = _module("relight_addon.blender.state").status(bpy.context.scene)
+    st = addon_module("relight_addon.blender.state").status(bpy.context.scene)
     assert any("'Inside'" in w and "'Box'" in w and "closed object" in w for w in st["warnings"])

@@ -5,6 +5,9 @@ solves (many presets, rho and seeds), so that the two test workers can share the
 import numpy as np
 import pytest
 
+# left out of `make test-quick`: furnaces with clutter at every preset, several seeds (minutes)
+pytestmark = pytest.mark.slow
+
 from relight_addon.core.radiosity.precompute import solve_radiosity
 from relight_addon.core.radiosity.presets import PRESETS
 from scenes.testscenes import clutter_furnace

@@ -1,17 +1,13 @@
 """No silent collapse (issue 9): when the model cannot explain the photo, the status bar and the
 panel say so and name the lamp or surface, and the user's powers are kept.  Through the
-operators, on the room of test_precompute_operator and the office of scenes.office."""
-import os
-import sys
+operators, on the room of helpers.room and the office of scenes.office."""
 
-import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_precompute_operator import LAMPS, _addon, _pixels, build_scene  # noqa: E402
+from helpers.blender import addon, pixels  # noqa: E402
+from helpers.room import LAMPS, build_scene  # noqa: E402
 
 
 def _warnings():
@@ -19,14 +15,14 @@ def _warnings():
 
 
 def _maps_peak(lamp):
-    return max(float(_pixels(im)[..., :3].max()) for im in bpy.data.images
+    return max(float(pixels(im)[..., :3].max()) for im in bpy.data.images
                if im.get("relight_generated") and im.name.endswith(f".relight.{lamp}"))
 
 
 def test_every_lamp_lights_the_random_photo_room_at_medium():
     """The suite's own room of random textures at medium: both lamps keep their power ratio
     and light the room (the old fit set every map of one lamp to 0)."""
-    _addon()
+    addon()
     build_scene()
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     st = bpy.context.scene["relight_status"]
@@ -37,7 +33,7 @@ def test_every_lamp_lights_the_random_photo_room_at_medium():
 
 
 def test_a_lamp_touching_a_wall_and_a_lamp_inside_a_box_are_named():
-    _addon()
+    addon()
     build_scene()
     # LampA 1 mm under the ceiling (z = 3)
     bpy.data.objects["LampA"].location.z = 3.0 - 0.001
@@ -63,10 +59,10 @@ def test_a_lamp_touching_a_wall_and_a_lamp_inside_a_box_are_named():
 
 
 def test_an_overexposed_wall_is_named():
-    _addon()
+    addon()
     build_scene()
     img = bpy.data.images["WallXp_mat_img"]
-    px = _pixels(img).copy()
+    px = pixels(img).copy()
     px[..., :3] = 1.0                                       # blown out: white
     img.pixels.foreach_set(px.ravel())
     img.update()

@@ -1,11 +1,10 @@
 """Nothing lost, nothing silent (issue 8): every check goes through the operators, and what is
 checked is the user's data (materials, images, slots, lights), not only our output.
 
-The room of ``test_precompute_operator`` (six textured walls, a box, two area lights) unless a
+The room of ``helpers.room`` (six textured walls, a box, two area lights) unless a
 test needs another scene; the lamp-off-in-the-photo test uses the office of ``scenes.office``
 with Cycles bakes as photo and truth.
 """
-import importlib
 import json
 import os
 import subprocess
@@ -17,23 +16,11 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 from blendstate import user_state  # noqa: E402
-from test_precompute_operator import (LAMPS, PKG, TEX, _addon, _material, _mesh_object,  # noqa: E402
-                                      _pixels, build_scene)
+from helpers.blender import addon, addon_module, pack_all, pixels  # noqa: E402
+from helpers.room import LAMPS, TEX, build_scene, textured_material  # noqa: E402
 
 ROOT = os.path.dirname(HERE)
-
-
-def _module(name):
-    _addon()
-    return importlib.import_module(f"{PKG}.{name}")
-
-
-def _pack_all():
-    for im in bpy.data.images:
-        if im.packed_file is None and len(im.pixels):
-            im.pack()
 
 
 def _relit_objects():
@@ -76,9 +63,9 @@ print("RELIGHT_FRESH_JSON " + json.dumps(out))
 
 
 def test_save_reopen_fresh_process_restore_precompute_update(tmp_path):
-    _addon()
+    addon()
     build_scene()
-    _pack_all()
+    pack_all()
     before = user_state(bpy)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     relit = _relit_objects()
@@ -105,7 +92,7 @@ def test_save_reopen_fresh_process_restore_precompute_update(tmp_path):
 
 def test_update_after_setting_a_lamp_to_zero_keeps_its_maps():
     """Only a power changed: Update is up to date and every lamp keeps its map and driver."""
-    _addon()
+    addon()
     build_scene()
     bpy.context.scene.relight.preset = "draft"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
@@ -129,7 +116,7 @@ def test_lamp_off_in_the_photo_gets_a_map_that_switches_it_on():
     from scenes.office import build_office
     sys.path.insert(0, ROOT)
     from demo.office import make_photographed
-    _addon()
+    addon()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     info = build_office(seed=0, n_lamps=2, texture_size=24)
     power = dict(info.lamp_powers)
@@ -151,8 +138,8 @@ def test_lamp_off_in_the_photo_gets_a_map_that_switches_it_on():
         nt = mat.node_tree
         intensity = {k: nt.nodes[f"I {k}"].outputs[0].default_value for k in power}
         assert intensity[a] == pytest.approx(1.0) and intensity[b] == pytest.approx(power[b])
-        t = _pixels(nt.nodes["T"].image)[..., :3].astype(np.float64)
-        relit = t * sum(intensity[k] * _pixels(nt.nodes[f"M {k}"].image)[..., :3] for k in power)
+        t = pixels(nt.nodes["T"].image)[..., :3].astype(np.float64)
+        relit = t * sum(intensity[k] * pixels(nt.nodes[f"M {k}"].image)[..., :3] for k in power)
         got.append(relit.reshape(-1, 3))
         want.append((truth_a[obj] + truth_b[obj]).reshape(-1, 3))
         before.append(np.asarray(photo[obj], np.float64).reshape(-1, 3))
@@ -170,7 +157,7 @@ def test_lamp_off_in_the_photo_gets_a_map_that_switches_it_on():
 
 
 def test_lamp_keyframed_from_zero_uses_its_highest_key_as_reference():
-    _addon()
+    addon()
     build_scene()
     light = bpy.data.lights["LampB"]
     light.energy = 0.0
@@ -187,18 +174,18 @@ def test_lamp_keyframed_from_zero_uses_its_highest_key_as_reference():
     bpy.context.scene.frame_set(10)
     assert bpy.data.materials["Floor_mat.relight"].node_tree.nodes["I LampB"].outputs[0] \
         .default_value == pytest.approx(1.0)
-    assert np.abs(_pixels(bpy.data.images["Floor_mat_img.relight.LampB"])[..., :3]).max() > 0
+    assert np.abs(pixels(bpy.data.images["Floor_mat_img.relight.LampB"])[..., :3]).max() > 0
 
 
 # -- 3, 4, 7. what the reader finds reaches the user ----------------------------------------
 
 def test_reader_warnings_reach_the_status_and_the_panel():
-    _addon()
+    addon()
     build_scene()
     # an image-textured object without a UV map, a missing image, a lamp that is off
     me = bpy.data.meshes.new("NoUV")
     me.from_pydata([(0, 0, 1), (0.3, 0, 1), (0.3, 0.3, 1), (0, 0.3, 1)], [], [(0, 1, 2, 3)])
-    me.materials.append(_material("NoUV_mat", 20))
+    me.materials.append(textured_material("NoUV_mat", 20))
     obj = bpy.data.objects.new("NoUV", me)
     bpy.context.scene.collection.objects.link(obj)
     missing = bpy.data.images.new("no_such_photo.png", 4, 4)
@@ -214,13 +201,13 @@ def test_reader_warnings_reach_the_status_and_the_panel():
     assert any("No UV map on object 'NoUV'" in w for w in warnings), warnings
     assert any("no_such_photo.png" in w and "no pixels" in w for w in warnings), warnings
     assert any("'Bulb'" in w and "off" in w for w in warnings), warnings
-    panel = _module("panels.main")
+    panel = addon_module("panels.main")
     lines = panel.warning_lines(bpy.context.scene)
     assert any("NoUV" in t for t in lines)
 
 
 def test_non_finite_vertices_are_skipped_with_a_warning():
-    _addon()
+    addon()
     build_scene()
     me = bpy.data.objects["Box"].data
     me.vertices[0].co = (float("nan"), 0.0, 0.0)
@@ -229,11 +216,11 @@ def test_non_finite_vertices_are_skipped_with_a_warning():
     assert any("'Box'" in w and "non-finite" in w for w in warnings), warnings
     for im in bpy.data.images:
         if im.get("relight_generated"):
-            assert np.isfinite(_pixels(im)).all(), im.name
+            assert np.isfinite(pixels(im)).all(), im.name
 
 
 def test_bad_input_is_one_sentence_without_traceback():
-    _addon()
+    addon()
     build_scene()
     for o in list(bpy.data.objects):
         if o.type == "MESH":
@@ -245,7 +232,7 @@ def test_bad_input_is_one_sentence_without_traceback():
 
 
 def test_nan_and_inf_texels_in_a_float_photo_are_sanitised():
-    _addon()
+    addon()
     build_scene()
     old = bpy.data.images["Floor_mat_img"]
     img = bpy.data.images.new("Floor_float", TEX, TEX, float_buffer=True)
@@ -260,9 +247,9 @@ def test_nan_and_inf_texels_in_a_float_photo_are_sanitised():
     warnings = list(bpy.context.scene["relight_status"]["warnings"])
     assert any("'Floor_float'" in w and "3 texel(s)" in w for w in warnings), warnings
     for name in ("Floor_float.relight.T", "Floor_float.relight.LampA"):
-        assert np.isfinite(_pixels(bpy.data.images[name])).all()
+        assert np.isfinite(pixels(bpy.data.images[name])).all()
     # the user's image is untouched
-    got = _pixels(img)
+    got = pixels(img)
     assert np.isnan(got[3, 4, 0]) and np.isinf(got[7, 1, 0]) and got[9, 9, 1] == -2.0
 
 
@@ -272,7 +259,7 @@ def test_unwrapped_object_is_relit_through_the_new_uv_map():
     """A material whose UV Map node names "UVMap" on a mesh without UVs: Unwrap Missing UVs
     writes "RelightUV", and the relit copy's UV Map node follows it, so a Cycles EMIT bake of
     the relit floor (through the material's own UVs) equals T x sum_k M_k texel by texel."""
-    _addon()
+    addon()
     build_scene()
     floor = bpy.data.objects["Floor"]
     floor.data.uv_layers.remove(floor.data.uv_layers["UVMap"])
@@ -302,16 +289,16 @@ def test_unwrapped_object_is_relit_through_the_new_uv_map():
         o.select_set(o.name == "Floor")
     bpy.context.view_layer.objects.active = floor
     bpy.ops.object.bake(type="EMIT", margin=0)
-    got = _pixels(target)[..., :3]
-    t = _pixels(nt.nodes["T"].image)[..., :3]
-    want = t * sum(_pixels(nt.nodes[f"M {k}"].image)[..., :3] for k in LAMPS)
+    got = pixels(target)[..., :3]
+    t = pixels(nt.nodes["T"].image)[..., :3]
+    want = t * sum(pixels(nt.nodes[f"M {k}"].image)[..., :3] for k in LAMPS)
     cover = got.sum(axis=-1) > 0
     assert cover.mean() > 0.3
     assert np.abs(got[cover] - want[cover]).max() < 1e-3 * max(want.max(), 1e-6) + 1e-4
 
 
 def test_duplicate_objects_are_named():
-    _addon()
+    addon()
     build_scene()
     box = bpy.data.objects["Box"]
     dup = box.copy()                                  # shares the mesh, same place
@@ -327,9 +314,9 @@ def test_duplicate_objects_are_named():
 def test_library_override_objects_are_relit_and_restored(tmp_path):
     """A library-override object whose mesh (and material slot) stays linked: its slot is
     switched to the object for the relit material, and Restore switches it back."""
-    _addon()
+    addon()
     build_scene()
-    _pack_all()
+    pack_all()
     lib = str(tmp_path / "lib.blend")
     coll = bpy.data.collections.new("Props")
     bpy.context.scene.collection.children.link(coll)
@@ -360,7 +347,7 @@ def test_library_override_objects_are_relit_and_restored(tmp_path):
 
 
 def test_instances_show_their_source_relit_and_the_warning_says_so():
-    _addon()
+    addon()
     build_scene()
     box = bpy.data.objects["Box"]
     coll = bpy.data.collections.new("BoxColl")
@@ -382,7 +369,7 @@ def test_instances_show_their_source_relit_and_the_warning_says_so():
 
 
 def test_clear_forgets_the_status_and_match_lamp_powers_is_disabled():
-    _addon()
+    addon()
     build_scene()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     assert bpy.ops.relight.match_lamp_powers.poll()
@@ -402,8 +389,8 @@ def test_clear_forgets_the_status_and_match_lamp_powers_is_disabled():
 def test_results_belong_to_their_scene_and_file(tmp_path):
     """Two scenes: Clear in one leaves the other's relit data and status; the in-memory result
     (for Update and the overlays) is forgotten when a file is loaded."""
-    settings = _module("relight_addon.blender.state")
-    _addon()
+    settings = addon_module("relight_addon.blender.state")
+    addon()
     build_scene()
     first = bpy.context.scene
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
@@ -439,8 +426,8 @@ def test_results_belong_to_their_scene_and_file(tmp_path):
 # -- conventions -----------------------------------------------------------------------------
 
 def test_every_operator_polls_and_is_named_after_its_class():
-    ops = _module("operators")
-    base = _module("operators.base")
+    ops = addon_module("operators")
+    base = addon_module("operators.base")
     for cls in ops.classes:
         if not issubclass(cls, bpy.types.Operator):
             continue
@@ -450,9 +437,9 @@ def test_every_operator_polls_and_is_named_after_its_class():
 
 
 def test_a_running_precompute_disables_another():
-    _addon()
+    addon()
     build_scene()
-    pre = _module("operators.precompute")
+    pre = addon_module("operators.precompute")
 
     class Running:
         state = "running"
@@ -471,9 +458,9 @@ def test_a_running_precompute_disables_another():
 
 
 def test_the_role_property_makes_an_occluder():
-    _addon()
+    addon()
     build_scene()
-    read = _module("relight_addon.blender.read")
+    read = addon_module("relight_addon.blender.read")
     box = bpy.data.objects["Box"]
     box.relight_role = "occluder"
     data, report = read.read_scene(bpy.context)

@@ -1,32 +1,20 @@
 """Values at the edge (issue 44: 4, 5, 9): handled, or refused with a sentence naming the light
-or material, through the operators on the test room of ``test_precompute_operator`` at draft.
+or material, through the operators on the test room of ``helpers.room`` at draft.
 
 Truth: at the photo's powers the relit room is the photo (whatever the units or the lamps)."""
-import os
-import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_data_safety import _module  # noqa: E402
-from test_precompute_operator import _pixels, _relit_state, build_scene  # noqa: E402
-from test_user_edits import _floor  # noqa: E402
-from test_virtual_lamps import relit_colour  # noqa: E402
-
-
-def _relit(name):
-    bpy.context.view_layer.update()
-    return relit_colour(name)
+from helpers.blender import addon_module, pixels, relit_now, relit_state  # noqa: E402
 
 
 def _photo(name):
     from relight_addon.core.texture.colour import srgb_to_linear
     img = bpy.data.materials[f"{name}_mat"].node_tree.nodes.get("Image Texture")
-    px = _pixels(img.image)[..., :3].astype(np.float64)
+    px = pixels(img.image)[..., :3].astype(np.float64)
     return px if img.image.is_float else srgb_to_linear(px)
 
 
@@ -38,7 +26,7 @@ def _float_photos(scale):
         if node is None or node.image is None:
             continue
         src = node.image
-        px = _pixels(src).copy()
+        px = pixels(src).copy()
         px[..., :3] = srgb_to_linear(px[..., :3]) * scale
         img = bpy.data.images.new(src.name + " float", src.size[0], src.size[1],
                                   float_buffer=True)
@@ -47,27 +35,20 @@ def _float_photos(scale):
         node.image = img
 
 
-@pytest.fixture
-def room():
-    _module("operators")
-    build_scene()
-    bpy.context.scene.relight.preset = "draft"
-
-
-def test_photos_beyond_half_floats_are_not_clipped(room):
+def test_photos_beyond_half_floats_are_not_clipped(test_room):
     """Photos in absolute units (every texel x 1e5): the textures are stored as 32-bit float and
     the user is told; the relit floor is the photo (was 0.927 of it: half floats end at
     65504)."""
     _float_photos(1e5)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     for name in ("Floor", "Ceiling"):
-        got, want = _relit(name), _photo(name)
+        got, want = relit_now(name), _photo(name)
         assert got.mean() / want.mean() == pytest.approx(1.0, abs=2e-3), name
-    st = _module("relight_addon.blender.state").status(bpy.context.scene)
+    st = addon_module("relight_addon.blender.state").status(bpy.context.scene)
     assert any("65504" in w and "32-bit" in w for w in st["warnings"])
 
 
-def test_a_very_bright_sun_leaves_the_rest_of_the_room_lit(room):
+def test_a_very_bright_sun_leaves_the_rest_of_the_room_lit(test_room):
     """A 1e9 W/m^2 sun beside 60 W lamps: at the photo's powers every surface is the photo
     (the box and the ceiling rendered black: the maps' floor was relative to the sunlit
     texels)."""
@@ -78,9 +59,9 @@ def test_a_very_bright_sun_leaves_the_rest_of_the_room_lit(room):
     bpy.context.scene.collection.objects.link(obj)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     for name in ("Floor", "Ceiling", "WallXn"):
-        got, want = _relit(name), _photo(name)
+        got, want = relit_now(name), _photo(name)
         assert got.mean() / want.mean() == pytest.approx(1.0, abs=2e-3), name
-    assert np.isfinite(_relit("Box")).all()
+    assert np.isfinite(relit_now("Box")).all()
 
 
 @pytest.mark.parametrize("power, says", [
@@ -88,27 +69,27 @@ def test_a_very_bright_sun_leaves_the_rest_of_the_room_lit(room):
     (float("inf"), "Light 'LampB' has power inf"),
     (-5.0, "Light 'LampB' has power -5"),
 ])
-def test_lamp_powers_at_the_edge_are_refused_naming_the_light(room, power, says):
-    before = _relit_state()
+def test_lamp_powers_at_the_edge_are_refused_naming_the_light(test_room, power, says):
+    before = relit_state()
     bpy.data.lights["LampB"].energy = power
     with pytest.raises(RuntimeError, match=says):
         bpy.ops.relight.precompute(preset="draft")
-    assert _relit_state() == before
+    assert relit_state() == before
 
 
-def test_an_infinite_emission_is_refused_naming_the_material(room):
+def test_an_infinite_emission_is_refused_naming_the_material(test_room):
     mat = bpy.data.objects["Box"].material_slots[0].material
     bsdf = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     bsdf.inputs["Emission Strength"].default_value = float("inf")
-    before = _relit_state()
+    before = relit_state()
     with pytest.raises(RuntimeError, match="Material 'Box_mat': its Emission Strength is 3.4"):
         bpy.ops.relight.precompute(preset="draft")
-    assert _relit_state() == before
+    assert relit_state() == before
 
 
-def test_a_dimmed_lamp_is_no_edge_after_precompute(room):
+def test_a_dimmed_lamp_is_no_edge_after_precompute(test_room):
     """After Precompute a lamp may go to any power 0 or more: the drivers follow it."""
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     bpy.data.lights["LampB"].energy = 1e-9
     assert bpy.ops.relight.update() == {"FINISHED"}
-    assert np.isfinite(_floor()).all()
+    assert np.isfinite(relit_now("Floor")).all()

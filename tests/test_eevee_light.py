@@ -1,7 +1,7 @@
 """EEVEE lights a virtual object with the relit room (issue 11): ``relight.eevee_light`` places an
 irradiance volume over the relit geometry and bakes it.
 
-The closed test room of test_precompute_operator (textured walls, a box, two area lamps),
+The closed test room of helpers.room (textured walls, a box, two area lamps),
 precomputed at draft, with a grey sphere in it.  Truth for the sphere's brightness: Cycles,
 where the relit surfaces' emission lights the sphere by itself.  Measured here: EEVEE without
 the volume shows the sphere at about half of Cycles' brightness (the room's light is missing);
@@ -10,7 +10,6 @@ driver, the bake survives save and reopen in a fresh process (a farm render), an
 the volume.
 """
 import importlib
-import os
 import subprocess
 import sys
 
@@ -19,9 +18,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_precompute_operator import LAMPS, PKG, _addon, build_scene  # noqa: E402
+# left out of `make test-quick`: EEVEE renders through software EGL
+pytestmark = pytest.mark.slow
+
+from helpers.blender import PKG, addon  # noqa: E402
+from helpers.room import LAMPS, build_scene  # noqa: E402
 from scenes.materials import grey_diffuse  # noqa: E402
 
 RES = (48, 36)
@@ -86,7 +87,7 @@ def _render(tmp_path, tag):
 
 
 def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
-    _addon()
+    addon()
     build_scene()
     scene = bpy.context.scene
     scene.relight.preset = "draft"

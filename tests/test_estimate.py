@@ -129,19 +129,19 @@ def test_the_indirect_weight_is_voted_by_the_surfaces_not_by_the_steepest():
     vote keeps the g most pieces agree on."""
     from scipy.optimize import minimize_scalar
 
-    from relight_addon.core.relight.exitance import _vote_g
+    from relight_addon.core.relight.exitance import vote_g
     tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(3), g_true=2.0, g_contact=0.1)
 
     def pooled(lg):
         w = np.exp(lg)
         return np.abs(dl - np.log(D[a] + w * I[a]) + np.log(D[b] + w * I[b])).sum()
     g_pooled = float(np.exp(minimize_scalar(pooled, bounds=(-3, 3), method="bounded").x))
-    g_vote, _ = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+    g_vote, _ = vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
     assert g_pooled < 1.5                                  # the pooled fit is dragged down
     assert abs(np.log(g_vote / 2.0)) < 0.13, g_vote         # the vote: within a grid step
     # without the bad pieces both agree
     tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(3), 2.0, 2.0)
-    assert abs(np.log(_vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[0] / 2.0)) < 0.13
+    assert abs(np.log(vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[0] / 2.0)) < 0.13
 
 
 def test_the_vote_says_how_sure_it_is():
@@ -149,17 +149,17 @@ def test_the_vote_says_how_sure_it_is():
     depth are on every piece, large where the pieces disagree (half of them with shadows 4
     times as deep as the others': what the model does not explain), and infinite where too few
     pieces vote: then rho^ stays at the user's first guess (exitance._fit_rho_mean)."""
-    from relight_addon.core.relight.exitance import _vote_g
+    from relight_addon.core.relight.exitance import vote_g
     for seed in range(5):
         tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 2.0)
-        g, sigma = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+        g, sigma = vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
         assert abs(np.log(g / 2.0)) < 0.13 and sigma < 0.1, (seed, g, sigma)
         tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 0.5, n_contact=6)
-        g, sigma = _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
+        g, sigma = vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))
         assert sigma > 0.3, (seed, g, sigma)
         tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(seed), 2.0, 2.0, n_pieces=4,
                                          n_contact=0, side=32)
-        assert _vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[1] == np.inf
+        assert vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[1] == np.inf
 
 
 def test_the_vote_follows_the_shadow_depth_between_grid_points():
@@ -167,13 +167,13 @@ def test_the_vote_follows_the_shadow_depth_between_grid_points():
     weighted median: on the grid alone g moved in steps of 12 %, and the solver's random seed
     flipped the office demo's rho^ between 0.50 and 0.52 (lamp scale 0.40 / 0.35, frame 3 vs
     Cycles 1.6 or 2.0 / 255).  Shadows of a depth between two grid points read as that depth."""
-    from relight_addon.core.relight.exitance import VOTE_GRID, _vote_g
+    from relight_addon.core.relight.exitance import VOTE_GRID, vote_g
     step = VOTE_GRID[1] - VOTE_GRID[0]
     log_true = 0.5 + step * np.linspace(0.0, 1.0, 6)
     votes = []
     for lt in log_true:
         tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(8), np.exp(lt), 1.0, n_contact=0)
-        votes.append(np.log(_vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[0]))
+        votes.append(np.log(vote_g(D, I, dl, tm, a, b, np.bincount(tm.patch))[0]))
     votes = np.array(votes)
     assert np.abs(votes - log_true).max() < 0.2 * step, (votes, log_true)
     assert np.all(np.diff(votes) > 0), votes
@@ -188,7 +188,7 @@ def test_on_a_fine_tessellation_cells_of_space_vote_not_the_few_large_patches():
     tessellation vote instead."""
     from types import SimpleNamespace
 
-    from relight_addon.core.relight.exitance import _space_cells, _vote_g
+    from relight_addon.core.relight.exitance import space_cells, vote_g
     from relight_addon.core.scene import SceneData
     side, fine = 64, 8
     tm, D, I, dl, a, b = _vote_scene(np.random.default_rng(4), g_true=2.0, g_contact=0.3,
@@ -217,13 +217,13 @@ def test_on_a_fine_tessellation_cells_of_space_vote_not_the_few_large_patches():
                       lamp=np.full(n_patches, -1))
     fine_tm = SimpleNamespace(patch=patch, u=u, v=v)
     per_patch = np.bincount(patch, minlength=n_patches)
-    g, sigma = _vote_g(D, I, dl, fine_tm, a, b, per_patch)
+    g, sigma = vote_g(D, I, dl, fine_tm, a, b, per_patch)
     assert sigma == np.inf                         # the contact patches alone would say 0.3
     cells = np.zeros(len(patch), np.int64)
-    cells[a] = _space_cells(scene, fine_tm, a, per_patch)
+    cells[a] = space_cells(scene, fine_tm, a, per_patch)
     # a cell is 32 texels a side (0.5 m here): four to a square, none across two squares
     assert len(np.unique(cells[a])) == 4 * 12
-    g, sigma = _vote_g(D, I, dl, SimpleNamespace(patch=cells, u=u, v=v), a, b,
+    g, sigma = vote_g(D, I, dl, SimpleNamespace(patch=cells, u=u, v=v), a, b,
                        np.ones(cells.max() + 1))
     assert abs(np.log(g / 2.0)) < 0.13 and sigma < 0.2, (g, sigma)
 
@@ -232,11 +232,11 @@ def test_space_cells_are_labelled_as_unique_rows():
     """The shadow-edge vote's space cells are labelled a column at a time: the labels of
     np.unique over the rows (lexicographic order), on rows with negative, repeated and
     single values."""
-    from relight_addon.core.relight.exitance import _row_labels
+    from relight_addon.core.relight.exitance import row_labels
     rng = np.random.default_rng(3)
     for n in (0, 1, 7, 5000):
         cols = [rng.integers(0, 3, n), rng.integers(0, 6, n), rng.integers(-40, 40, n),
                 rng.integers(-2, 2, n), np.full(n, 5)]
         want = np.unique(np.column_stack(cols), axis=0, return_inverse=True)[1].ravel() \
             if n else np.zeros(0, np.int64)
-        assert np.array_equal(_row_labels(cols), want)
+        assert np.array_equal(row_labels(cols), want)

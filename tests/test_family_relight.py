@@ -15,6 +15,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
+# left out of `make test-quick`: the room family's solves against Cycles truth (minutes)
+pytestmark = pytest.mark.slow
+
 from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free  # noqa: E402
 from scenes import family as fam  # noqa: E402
 from scenes import family_eval as fe  # noqa: E402

@@ -38,6 +38,7 @@ print(json.dumps({{"measured": (peak - before) * 1024 + BASE_BYTES,
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
 @pytest.mark.parametrize("preset,n", [("draft", 18), ("medium", 8)])
 def test_estimate_bounds_a_measured_solve_closely(preset, n):
@@ -74,6 +75,7 @@ print(json.dumps({{"measured": (peak - before) * 1024 + BASE_BYTES,
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
 def test_estimate_of_a_scan_solved_on_a_proxy_is_within_a_quarter():
     """Issue 10's target: a scanned room's precompute (20k triangles solved on a proxy of

@@ -1,27 +1,16 @@
 """Messages that must not mislead (issue 44: 2, 9), through the operators on the test room of
-``test_precompute_operator`` at draft: what each says is checked against what is true of the
+``helpers.room`` at draft: what each says is checked against what is true of the
 scene (where the lamps are, what the objects are, what is missing)."""
-import os
-import sys
 
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_data_safety import _module  # noqa: E402
-from test_precompute_operator import _relit_state, build_scene  # noqa: E402
-
-
-@pytest.fixture
-def room():
-    _module("operators")
-    build_scene()
+from helpers.blender import addon_module, relit_state  # noqa: E402
 
 
 def _warnings():
-    st = _module("relight_addon.blender.state").status(bpy.context.scene) or {}
+    st = addon_module("relight_addon.blender.state").status(bpy.context.scene) or {}
     return list(st.get("warnings", ()))
 
 
@@ -35,7 +24,7 @@ def _mesh(name, verts, faces, location=(0, 0, 0)):
     return obj
 
 
-def test_triangles_do_not_put_every_lamp_against_a_surface(room):
+def test_triangles_do_not_put_every_lamp_against_a_surface(test_room):
     """A triangle (or an n-gon, split in triangles) anywhere made every lamp 'inside or
     touching a surface': its quad's second half has no area."""
     _mesh("Tri", [(0, 0, 0.5), (0.3, 0, 0.5), (0, 0.3, 0.5)], [(0, 1, 2)])
@@ -45,7 +34,7 @@ def test_triangles_do_not_put_every_lamp_against_a_surface(room):
     assert not [w for w in _warnings() if "touching a surface" in w or "mm from a" in w]
 
 
-def test_a_lamp_against_a_surface_is_named(room):
+def test_a_lamp_against_a_surface_is_named(test_room):
     """The true case still says so: a lamp 2 mm under the ceiling."""
     bpy.data.objects["LampA"].location.z = 2.998
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
@@ -53,7 +42,7 @@ def test_a_lamp_against_a_surface_is_named(room):
     assert not [w for w in _warnings() if "'LampB'" in w and "surface" in w]
 
 
-def test_a_small_scene_is_judged_at_its_own_scale(room):
+def test_a_small_scene_is_judged_at_its_own_scale(test_room):
     """The room at 1e-4 scale gives the result of scale 1: no lamp is '0 mm from a surface'."""
     for obj in bpy.data.objects:
         obj.location = [c * 1e-4 for c in obj.location]
@@ -66,7 +55,7 @@ def test_a_small_scene_is_judged_at_its_own_scale(room):
     assert not [w for w in _warnings() if "surface" in w and "Lamp" in w]
 
 
-def test_a_text_object_is_no_duplicate(room):
+def test_a_text_object_is_no_duplicate(test_room):
     cu = bpy.data.curves.new("Label", "FONT")
     cu.body = "Relight"
     obj = bpy.data.objects.new("Label", cu)
@@ -77,7 +66,7 @@ def test_a_text_object_is_no_duplicate(room):
     assert not [w for w in _warnings() if "same place" in w]
 
 
-def test_a_lamp_inside_a_closed_box_is_named(room):
+def test_a_lamp_inside_a_closed_box_is_named(test_room):
     """A point lamp inside the room's closed box lights only the box's inside: the warning names
     the lamp and the box (the photo cannot show its light)."""
     light = bpy.data.lights.new("Inside", "POINT")
@@ -91,13 +80,13 @@ def test_a_lamp_inside_a_closed_box_is_named(room):
     assert len(said) == 1 and "'Inside'" in said[0] and "'Box'" in said[0]
 
 
-def test_the_room_itself_encloses_no_lamp(room):
+def test_the_room_itself_encloses_no_lamp(test_room):
     """The room the camera is in is closed too: its lamps are not 'inside a closed object'."""
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     assert not [w for w in _warnings() if "inside the closed object" in w]
 
 
-def test_no_uv_map_names_the_reason_and_the_fix(room):
+def test_no_uv_map_names_the_reason_and_the_fix(test_room):
     """Every mesh without UVs: the error says so and suggests Unwrap Missing UVs (not only 'no
     face uses an image texture')."""
     for obj in bpy.data.objects:
@@ -105,7 +94,7 @@ def test_no_uv_map_names_the_reason_and_the_fix(room):
             while obj.data.uv_layers:
                 obj.data.uv_layers.remove(obj.data.uv_layers[0])
             obj.data.update()               # (the API does not tag the mesh for evaluation)
-    before = _relit_state()
+    before = relit_state()
     with pytest.raises(RuntimeError, match="No UV map on object .*Unwrap Missing UVs"):
         bpy.ops.relight.precompute(preset="draft")
-    assert _relit_state() == before
+    assert relit_state() == before

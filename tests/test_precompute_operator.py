@@ -23,128 +23,37 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from scenes.addon import PACKAGE as PKG, register_repo_addon  # noqa: E402
+from scenes.addon import PACKAGE as PKG  # noqa: E402
 from relight_addon.core.texture.colour import srgb_to_linear  # noqa: E402
+from helpers.blender import addon, pixels, relit_state  # noqa: E402
+from helpers.room import LAMPS, TEX, _quad, build_scene, mesh_object  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-TEX = 16
-LAMPS = {"LampA": ((-1.0, 0.0, 2.9), 60.0), "LampB": ((1.0, 0.5, 2.9), 30.0)}
-
-
-def _addon():
-    return register_repo_addon()
 
 
 def _write():
-    _addon()
+    addon()
     return importlib.import_module(PKG + ".relight_addon.blender.write")
 
 
 def _state():
-    _addon()
+    addon()
     return importlib.import_module(PKG + ".relight_addon.blender.state")
 
 
 def _prepare(preset, correction=None):
     """The pipeline's Job of a Precompute of the current scene (read, decided, not computed)."""
-    _addon()
+    addon()
     pipeline = importlib.import_module(PKG + ".relight_addon.blender.pipeline")
     return pipeline.prepare(bpy.context, "precompute", preset, correction)
 
 
 # -- scene ---------------------------------------------------------------------------------
 
-def _image(name, seed):
-    img = bpy.data.images.new(name, TEX, TEX)
-    rng = np.random.default_rng(seed)
-    px = np.ones((TEX, TEX, 4), np.float32)
-    px[..., :3] = 0.3 + 0.6 * rng.random((TEX, TEX, 3))
-    img.pixels.foreach_set(px.reshape(-1))
-    return img
-
-
-def _material(name, seed):
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    bsdf = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = _image(name + "_img", seed)
-    uvn = nt.nodes.new("ShaderNodeUVMap")
-    uvn.uv_map = "UVMap"
-    nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
-    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-    return mat
-
-
-def _mesh_object(name, verts, faces, mat):
-    """Faces get non-overlapping UV cells: one face -> the unit square, more -> a 3 x 2 atlas."""
-    me = bpy.data.meshes.new(name)
-    me.from_pydata([tuple(v) for v in verts], [], [tuple(f) for f in faces])
-    uv = me.uv_layers.new(name="UVMap")
-    square = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
-    for i, poly in enumerate(me.polygons):
-        cell = square if len(faces) == 1 else (square + (i % 3, i // 3)) / (3, 2)
-        for j, li in enumerate(poly.loop_indices):
-            uv.data[li].uv = tuple(cell[j % 4])
-    me.materials.append(mat)
-    obj = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
-
-
-def _quad(c, n, half):
-    """Corners of a square centred at c with normal n (counter-clockwise around n)."""
-    c, n = np.asarray(c, float), np.asarray(n, float)
-    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(n, a)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
-    return [c - half[0] * u - half[1] * v, c + half[0] * u - half[1] * v,
-            c + half[0] * u + half[1] * v, c - half[0] * u + half[1] * v]
-
-
-def build_scene(lamps=True):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    walls = {  # name: (centre, inward normal, half sizes)
-        "Floor": ((0, 0, 0), (0, 0, 1), (2, 2)), "Ceiling": ((0, 0, 3), (0, 0, -1), (2, 2)),
-        "WallXn": ((-2, 0, 1.5), (1, 0, 0), (1.5, 2)), "WallXp": ((2, 0, 1.5), (-1, 0, 0), (1.5, 2)),
-        "WallYn": ((0, -2, 1.5), (0, 1, 0), (2, 1.5)), "WallYp": ((0, 2, 1.5), (0, -1, 0), (2, 1.5)),
-    }
-    for i, (name, (c, n, half)) in enumerate(walls.items()):
-        # _quad's u is n x a: swap the half sizes if the square is not square-ish; all fit.
-        verts = _quad(c, n, (max(half), max(half)) if half[0] == half[1] else half)
-        _mesh_object(name, verts, [(0, 1, 2, 3)], _material(name + "_mat", i))
-    # Box 0.8 m on the floor, outward normals.
-    x0, y0, s = 0.3, 0.2, 0.8
-    v = [(x0 + dx * s, y0 + dy * s, dz * s) for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)]
-    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    _mesh_object("Box", v, faces, _material("Box_mat", 10))
-    if lamps:
-        for name, (loc, power) in LAMPS.items():
-            light = bpy.data.lights.new(name, "AREA")
-            light.energy = power
-            light.size = 0.5
-            obj = bpy.data.objects.new(name, light)
-            obj.location = loc
-            bpy.context.scene.collection.objects.link(obj)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0, -1.5, 1.5)
-    bpy.context.scene.collection.objects.link(cam)
-    bpy.context.scene.camera = cam
-    bpy.context.view_layer.update()
-
-
-def _pixels(img):
-    buf = np.empty(len(img.pixels), np.float32)
-    img.pixels.foreach_get(buf)
-    return buf.reshape(img.size[1], img.size[0], -1)
-
 
 def _snapshot():
     """Original images' pixels and the node/link structure of every material."""
-    imgs = {im.name: _pixels(im).copy() for im in bpy.data.images}
+    imgs = {im.name: pixels(im).copy() for im in bpy.data.images}
     mats = {}
     for m in bpy.data.materials:
         nt = m.node_tree
@@ -168,7 +77,7 @@ def _m_images(mat):
 @pytest.fixture(scope="module")
 def precomputed():
     """One precompute shared by the read-only checks (the solve is the slow part)."""
-    _addon()
+    addon()
     build_scene()
     before = _snapshot()
     counts = (len(bpy.data.images), len(bpy.data.materials))
@@ -199,7 +108,7 @@ def test_precompute_finishes_and_writes(precomputed):
             names_types.append((data[at:end], int.from_bytes(data[end + 1:end + 5], "little")))
             at = end + 1 + 16
         assert names_types and all(t == 1 for _, t in names_types), names_types   # 1 = HALF
-        px = _pixels(im)
+        px = pixels(im)
         assert np.isfinite(px).all(), im.name
     names = {im.name for im in gen}
     assert "Floor_mat_img.relight.LampA" in names and "Box_mat_img.relight.LampB" in names
@@ -212,7 +121,7 @@ def test_originals_untouched(precomputed):
     _, (imgs0, mats0, slots0), _ = precomputed
     for name, px in imgs0.items():
         assert name in bpy.data.images
-        np.testing.assert_array_equal(_pixels(bpy.data.images[name]), px)
+        np.testing.assert_array_equal(pixels(bpy.data.images[name]), px)
     now = _snapshot()[1]
     for name, structure in mats0.items():
         assert name in bpy.data.materials
@@ -251,11 +160,11 @@ def test_relit_reproduces_the_photo_and_drivers_are_one(precomputed):
     for mat in [m for m in bpy.data.materials if m.get("relight_generated")]:
         maps = _m_images(mat)
         assert set(maps) == set(LAMPS)
-        total = sum(_pixels(im)[..., :3].astype(np.float64) for im in maps.values())
+        total = sum(pixels(im)[..., :3].astype(np.float64) for im in maps.values())
         assert np.all(total <= 1 + 2e-3), mat.name
-        t_final = _pixels(mat.node_tree.nodes["T"].image)[..., :3].astype(np.float64)
+        t_final = pixels(mat.node_tree.nodes["T"].image)[..., :3].astype(np.float64)
         orig = mat.name[: -len(".relight")] + "_img"
-        photo = srgb_to_linear(_pixels(bpy.data.images[orig])[..., :3].astype(np.float64))
+        photo = srgb_to_linear(pixels(bpy.data.images[orig])[..., :3].astype(np.float64))
         lit = total > 0
         assert np.all(t_final[lit] >= photo[lit] - 2e-3), mat.name    # shadows only brighten
         rel = np.abs(t_final * total - photo) / np.maximum(photo, 0.02)
@@ -295,12 +204,12 @@ def test_driver_follows_light_power(precomputed):
 
 def test_lamp_maps_differ(precomputed):
     """Sanity: the two lamps light the room differently (the maps are not a constant split)."""
-    a = _pixels(bpy.data.images["Floor_mat_img.relight.LampA"])[..., 0]
+    a = pixels(bpy.data.images["Floor_mat_img.relight.LampA"])[..., 0]
     assert a.max() - a.min() > 0.05
 
 
 def test_save_reload_keeps_packed_pixels(precomputed):
-    before = {im.name: _pixels(im).copy() for im in bpy.data.images if im.get("relight_generated")}
+    before = {im.name: pixels(im).copy() for im in bpy.data.images if im.get("relight_generated")}
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "relit.blend")
         bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
@@ -308,13 +217,13 @@ def test_save_reload_keeps_packed_pixels(precomputed):
     for name, px in before.items():
         im = bpy.data.images[name]
         assert im.packed_file is not None
-        np.testing.assert_allclose(_pixels(im), px, atol=2e-3)   # half float
+        np.testing.assert_allclose(pixels(im), px, atol=2e-3)   # half float
     mat = bpy.data.materials["Floor_mat.relight"]
     assert bpy.data.objects["Floor"].material_slots[0].material == mat
 
 
 def test_restore_clear_and_rerun_do_not_leak():
-    _addon()
+    addon()
     build_scene()
     imgs0, mats0, slots0 = _snapshot()
     counts0 = (len(bpy.data.images), len(bpy.data.materials))
@@ -337,7 +246,7 @@ def test_restore_clear_and_rerun_do_not_leak():
 
 
 def test_clear_while_assigned_restores_first():
-    _addon()
+    addon()
     build_scene()
     slots0 = _snapshot()[2]
     counts0 = (len(bpy.data.images), len(bpy.data.materials))
@@ -348,7 +257,7 @@ def test_clear_while_assigned_restores_first():
 
 
 def test_no_lamps_is_cancelled_without_changes():
-    _addon()
+    addon()
     build_scene(lamps=False)
     imgs0, mats0, slots0 = _snapshot()
     counts0 = (len(bpy.data.images), len(bpy.data.materials))
@@ -364,7 +273,7 @@ def test_no_lamps_is_cancelled_without_changes():
 
 def test_worker_job_and_display_maps():
     """The modal path's worker: a cancel raised from the progress callback stops the solve."""
-    _addon()
+    addon()
     build_scene()
     op = importlib.import_module(PKG + ".operators.precompute")
     counts0 = (len(bpy.data.images), len(bpy.data.materials))
@@ -419,7 +328,7 @@ def test_worker_job_and_display_maps():
 
 
 def test_invoke_in_background_runs_synchronously():
-    _addon()
+    addon()
     build_scene()
     assert bpy.app.background
     assert bpy.ops.relight.precompute("INVOKE_DEFAULT", preset="draft") == {"FINISHED"}
@@ -427,10 +336,10 @@ def test_invoke_in_background_runs_synchronously():
 
 
 def test_faces_without_image_are_left_alone_and_no_image_is_an_error():
-    _addon()
+    addon()
     build_scene()
     plain = bpy.data.materials.new("Plain_mat")
-    _mesh_object("Plain", _quad((0, -1, 1.0), (0, 1, 0), (0.3, 0.3)), [(0, 1, 2, 3)], plain)
+    mesh_object("Plain", _quad((0, -1, 1.0), (0, 1, 0), (0.3, 0.3)), [(0, 1, 2, 3)], plain)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     assert bpy.data.objects["Plain"].material_slots[0].material == plain
     assert "relight_original_materials" not in bpy.data.objects["Plain"]
@@ -451,7 +360,7 @@ def test_faces_without_image_are_left_alone_and_no_image_is_an_error():
 @pytest.fixture
 def fresh():
     """A new room, precomputed (earlier tests rebuild and clear the shared one)."""
-    _addon()
+    addon()
     build_scene()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
 
@@ -522,40 +431,33 @@ def test_match_lamp_powers_keeps_the_relit_look(fresh):
         scene["relight_status"] = st
 
 
-def _relit_state():
-    return ({o.name: [s.material.name if s.material else "" for s in o.material_slots]
-             for o in bpy.data.objects if o.type == "MESH"},
-            sorted(im.name for im in bpy.data.images if im.get("relight_generated")),
-            "relight_status" in bpy.context.scene)
-
-
 def test_undo_precompute_and_restore():
     """Undo after Precompute gives the scene back as it was (originals assigned, no generated
     data, no status); redo brings the relit result back; undo after Restore re-assigns the
     relit materials.  Headless Blender has no automatic undo steps for script-called
     operators, so steps are pushed explicitly around each call, as the UI does."""
-    _addon()
+    addon()
     build_scene()
     bpy.ops.ed.undo_push(message="built")
-    before = _relit_state()
+    before = relit_state()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     bpy.ops.ed.undo_push(message="precomputed")
-    relit = _relit_state()
+    relit = relit_state()
     assert relit != before and relit[1] and relit[2]
     bpy.ops.ed.undo()
-    assert _relit_state() == before
+    assert relit_state() == before
     imgs0, mats0, _ = _snapshot()
     bpy.ops.ed.redo()
-    assert _relit_state() == relit
+    assert relit_state() == relit
     assert bpy.ops.relight.restore_originals() == {"FINISHED"}
     bpy.ops.ed.undo_push(message="restored")
-    restored = _relit_state()
+    restored = relit_state()
     assert restored[0] == before[0] and restored[1] == relit[1]
     bpy.ops.ed.undo()
-    assert _relit_state() == relit
+    assert relit_state() == relit
     # the originals survived the round trips untouched
     for name, px in imgs0.items():
-        np.testing.assert_array_equal(_pixels(bpy.data.images[name]), px)
+        np.testing.assert_array_equal(pixels(bpy.data.images[name]), px)
 
 
 def _link_from_library(tmp_path, names):
@@ -577,7 +479,7 @@ def _link_from_library(tmp_path, names):
 def test_linked_objects_are_left_alone(tmp_path):
     """A linked (read-only) object keeps its material, casts shadows, gets no relit copy and no
     maps; the others are relit."""
-    _addon()
+    addon()
     build_scene()
     _link_from_library(tmp_path, ["Box"])
     box = bpy.data.objects["Box"]
@@ -592,26 +494,26 @@ def test_linked_objects_are_left_alone(tmp_path):
 
 
 def test_all_linked_is_an_error_without_changes(tmp_path):
-    _addon()
+    addon()
     build_scene()
     names = ["Floor", "Ceiling", "WallXn", "WallXp", "WallYn", "WallYp", "Box"]
     _link_from_library(tmp_path, names)
-    before = _relit_state()
+    before = relit_state()
     with pytest.raises(RuntimeError, match="linked from a library"):
         bpy.ops.relight.precompute(preset="draft")
-    assert _relit_state() == before
+    assert relit_state() == before
 
 
 def test_cancel_midway_changes_nothing():
     """Esc in the middle of the work (here: once the progress passes 30 %) stops the worker at
     its next progress report; nothing is written."""
-    _addon()
+    addon()
     build_scene()
     op = importlib.import_module(PKG + ".operators.precompute")
-    before = _relit_state()
+    before = relit_state()
     job = op.SolveJob(_prepare("draft"))
     seen = []
-    report_progress = job._progress
+    report_progress = job.progress
 
     def progress(fraction, message):
         seen.append(fraction)
@@ -619,18 +521,18 @@ def test_cancel_midway_changes_nothing():
             job.cancel()
         return report_progress(fraction, message)
 
-    job._progress = progress
+    job.progress = progress
     job.start()
     assert job.join(timeout=120)
     assert job.state == "cancelled" and job.result is None
     assert any(f >= 0.3 for f in seen) and max(seen) < 1.0
-    assert _relit_state() == before
+    assert relit_state() == before
 
 
 def test_update_reuses_an_unchanged_result():
     """Update does nothing when nothing that matters changed (a lamp's power is followed by the
     drivers), and re-runs after a lamp moved or the quality changed."""
-    _addon()
+    addon()
     build_scene()
     scene = bpy.context.scene
     scene.relight.preset = "draft"
@@ -675,7 +577,7 @@ def test_overlay_setting_is_inert_in_background(fresh):
 def test_other_shadow_removal_modes(correction):
     """Per-element removal writes a T_final image too; with the correction off T is the
     original image (the DRB97 baseline) and the maps sum to 1 where lit."""
-    _addon()
+    addon()
     build_scene()
     assert bpy.ops.relight.precompute(preset="draft", correction=correction) == {"FINISHED"}
     mat = bpy.data.materials["Floor_mat.relight"]
@@ -683,27 +585,27 @@ def test_other_shadow_removal_modes(correction):
     gen = [im for im in bpy.data.images if im.get("relight_generated")]
     if correction == "NONE":
         assert t_image.name == "Floor_mat_img" and len(gen) == 7 * len(LAMPS)
-        total = sum(_pixels(im)[..., :3].astype(np.float64) for im in _m_images(mat).values())
+        total = sum(pixels(im)[..., :3].astype(np.float64) for im in _m_images(mat).values())
         assert np.all((np.abs(total - 1) < 2e-3) | (total == 0))
     else:
         assert t_image.name == "Floor_mat_img.relight.T" and len(gen) == 7 * (len(LAMPS) + 1)
-        assert np.isfinite(_pixels(t_image)).all()
+        assert np.isfinite(pixels(t_image)).all()
     assert bpy.context.scene["relight_status"]["correction"] == correction
 
 
 def test_update_after_photo_edit_keeps_the_mesh():
     """Only a photo changed: Update keeps the last run's mesh and links (the same hierarchy
     object), writes new textures, and the result is close to a full precompute's."""
-    _addon()
+    addon()
     build_scene()
     scene = bpy.context.scene
     scene.relight.preset = "draft"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     settings = _state()
     first = settings.last_result(scene)
-    t_before = _pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
+    t_before = pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
     img = bpy.data.images["Floor_mat_img"]
-    px0 = _pixels(img).copy()
+    px0 = pixels(img).copy()
     px = px0.copy()
     px[:8, :, :3] *= 0.5                          # darken half of the floor photo
     img.pixels.foreach_set(px.ravel())
@@ -717,10 +619,10 @@ def test_update_after_photo_edit_keeps_the_mesh():
     assert status["rho_sigma"] == -1 and status["rho_mean"] == pytest.approx(0.5)
     assert second.solution.hierarchy is first.solution.hierarchy       # mesh and links kept
     assert scene["relight_status"]["action"] == "reuse"
-    t_reused = _pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
+    t_reused = pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3].copy()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}   # from scratch
     assert settings.last_result(scene).solution.hierarchy is not first.solution.hierarchy
-    t_full = _pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3]
+    t_full = pixels(bpy.data.images["Floor_mat_img.relight.T"])[..., :3]
     # (the fresh mesh is refined for the edited photo, so texels near shadow edges differ:
     # 1.1 % of the mean; 5.3 % when this room's random photos moved rho^ by chance, before it
     # stayed where too few pieces of surface vote: exitance._fit_rho_mean)
@@ -728,7 +630,7 @@ def test_update_after_photo_edit_keeps_the_mesh():
     # the photo edit shows in T_final as in the photo (the shadow-removal factor depends on the
     # geometry, on reflectance only through interreflections); the 8-bit photo is sRGB-encoded
     old, new = (srgb_to_linear(x[:8, :, :3].astype(np.float64)).mean()
-                for x in (px0, _pixels(img)))
+                for x in (px0, pixels(img)))
     ratio = t_reused[:8].mean() / t_before[:8].mean()
     # (0.7 %; 12 % when the edit's edge moved rho^ 0.50 -> 0.46 on these random photos)
     assert abs(ratio / (new / old) - 1) < 0.03, (ratio, new / old)
@@ -737,7 +639,7 @@ def test_update_after_photo_edit_keeps_the_mesh():
 def test_driver_follows_light_colour():
     """Changing a lamp's colour changes its light channel by channel (C_k drivers), with simple
     expressions; the other lamp is untouched."""
-    _addon()
+    addon()
     build_scene()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     mat = bpy.data.materials["Floor_mat.relight"]

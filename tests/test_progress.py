@@ -112,12 +112,12 @@ def test_no_second_job_until_the_cancelled_one_has_stopped():
     job = op.SolveJob(Slow()).start()
     op._ACTIVE["job"] = job
     try:
-        assert "running" in op._busy_reason()
+        assert "running" in op.busy_reason()
         t0 = time.monotonic()
         job.cancel()
-        assert "stopping" in op._busy_reason()
+        assert "stopping" in op.busy_reason()
         assert job.join(timeout=5)
         assert time.monotonic() - t0 < 0.3           # the next progress report stopped it
-        assert job.state == "cancelled" and op._busy_reason() is None
+        assert job.state == "cancelled" and op.busy_reason() is None
     finally:
         op._ACTIVE["job"] = None

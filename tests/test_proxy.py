@@ -7,6 +7,9 @@ family test room against its Cycles truth, beside the same room read as clean qu
 import numpy as np
 import pytest
 
+# left out of `make test-quick`: scanned rooms of 100k faces solved on their proxies (minutes)
+pytestmark = pytest.mark.slow
+
 from relight_addon.core.radiosity.proxy import (_closest_on_triangles, build_proxy, locate,
                                                 plane_normals, smooth_normals)
 from relight_addon.core.scene import SceneData

@@ -10,7 +10,7 @@ from relight_addon.core.radiosity.presets import PRESETS
 from relight_addon.core.scene import SceneData, SceneError, quads_from_boxes
 from scenes.testscenes import (blinds_room, closed_cube, clutter_furnace, cornell_box, flip,
                                parallel_squares, subdivide_quads)
-from test_formfactor import howell_c14
+from helpers.formfactors import howell_c14
 
 
 def _closed_box(rho, emission):
@@ -64,6 +64,7 @@ def test_furnace_with_non_uniform_emission_conserves_power(rho):
     assert B.max() <= 3.0 / (1 - rho)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["draft", "medium"])
 def test_a_furnace_at_rho_0_99_is_not_refined_where_nothing_varies(preset):
     """A closed cube at rho 0.99: with uniform emission B = E / (1 - rho) everywhere and the six
@@ -468,6 +469,7 @@ def test_no_leaf_gathers_more_than_its_hemisphere_in_open_clutter():
     assert sol.info.converged and np.all(np.isfinite(sol.radiosity()))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["draft", "medium"])
 def test_no_leaf_gathers_more_than_its_hemisphere_by_two_sided_blinds(preset):
     """Venetian blinds: thin slats 1 cm apart, each two-sided (a back copy that blocks no ray,

@@ -9,7 +9,7 @@ Issue "Blender path", section Persistence and renders:
   auto-run off gives the same frames (what a render-farm worker sees);
 * save, reopen: the relit materials are still assigned and the images packed (no recompute).
 
-Set-up: the room of ``test_precompute_operator`` (its scene builder is imported), original
+Set-up: the room of ``helpers.room`` (its scene builder), original
 images packed (a generated image that is not packed loses its pixels on save), the ceiling's
 Image Texture switched to Closest before the precompute (the M_k nodes copy it), precompute
 "draft", LampA's energy keyframed P0 / 0 / 2 P0 on frames 1 / 2 / 3, LampB constant.
@@ -40,8 +40,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_precompute_operator import LAMPS, TEX, _addon, _pixels, build_scene  # noqa: E402
+# left out of `make test-quick`: Cycles and EEVEE renders, a farm worker process
+pytestmark = pytest.mark.slow
+
+from helpers.blender import addon, pixels  # noqa: E402
+from helpers.room import LAMPS, TEX, build_scene  # noqa: E402
 
 FRAMES = (1, 2, 3)
 VIEWED = "Ceiling"
@@ -155,7 +158,7 @@ def _keyframe_lamps():
 def _read_exr(path):
     img = bpy.data.images.load(path, check_existing=False)
     try:
-        px = _pixels(img).astype(np.float64)
+        px = pixels(img).astype(np.float64)
         assert img.size[0] == TEX and img.size[1] == TEX, (path, tuple(img.size))
     finally:
         bpy.data.images.remove(img)
@@ -187,7 +190,7 @@ def max_rel_err(got, want):
 def relit(tmp_path_factory):
     """Precomputed, keyframed, camera and output set; saved to a .blend. Returns a dict."""
     tmp = tmp_path_factory.mktemp("relit_renders")
-    _addon()
+    addon()
     build_scene()
     for img in bpy.data.images:
         img.pack()                          # what a photo on disk / packed would be
@@ -210,8 +213,8 @@ def relit(tmp_path_factory):
     for n in relit_mat.node_tree.nodes:
         if n.bl_idname == "ShaderNodeTexImage":
             assert n.interpolation == "Closest", n.name
-    t_lin = _pixels(t_img)[..., :3].astype(np.float64)      # half float, linear
-    m = {k: _pixels(im)[..., :3].astype(np.float64) for k, im in maps.items()}
+    t_lin = pixels(t_img)[..., :3].astype(np.float64)      # half float, linear
+    m = {k: pixels(im)[..., :3].astype(np.float64) for k, im in maps.items()}
     expected = {f: t_lin * sum(intensities(f)[k] * m[k] for k in LAMPS) for f in FRAMES}
     # the drivers in this process give the scheduled intensities
     for f in FRAMES:

@@ -11,6 +11,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
+# left out of `make test-quick`: the office at medium and its Cycles bakes (a 75 s module fixture)
+pytestmark = pytest.mark.slow
+
 from relight_addon.core.relight.maps import FACTOR_MAX  # noqa: E402
 from relight_addon.core.relight.shadowfree import ShadowFreeOptions, shadow_free  # noqa: E402
 from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402

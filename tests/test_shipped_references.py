@@ -15,6 +15,7 @@ from conftest import SHIPPED_CACHE
 VERSIONS = json.loads(open(os.path.join(SHIPPED_CACHE, "versions.json")).read())
 
 
+@pytest.mark.slow
 def test_mitsuba_cornell_box_renders_as_shipped():
     pytest.importorskip("mitsuba")
     from reference.mitsuba_ref import DEFAULT_REPEATS, _cache_dir, mitsuba_version, patch_radiosity

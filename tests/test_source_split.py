@@ -8,7 +8,7 @@ from relight_addon.core.radiosity.links import LeafGather
 from relight_addon.core.radiosity.source_split import split_sources
 from relight_addon.core.scene import SceneData
 
-from test_formfactor import pvf_ff
+from helpers.formfactors import pvf_ff
 
 
 def _room_corner():

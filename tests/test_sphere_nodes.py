@@ -1,6 +1,6 @@
 """Moving virtual objects (issue 11): sphere shadows evaluated by the relit materials.
 
-The closed test room of test_precompute_operator (six textured walls, a box, two area lamps),
+The closed test room of helpers.room (six textured walls, a box, two area lamps),
 precomputed at draft; Suzanne, Relight Role "virtual" with Moving shadows, above the floor.
 
 * The node groups compute what their numpy twin (core/relight/sphere_shadow.py) computes: the
@@ -29,8 +29,8 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-from test_precompute_operator import PKG, _addon, build_scene  # noqa: E402
+from helpers.blender import PKG, addon  # noqa: E402
+from helpers.room import build_scene  # noqa: E402
 from relight_addon.core.relight.sphere_shadow import sphere_visibility, to_local  # noqa: E402
 
 BAKE = 32          # texels of the floor bakes
@@ -56,7 +56,7 @@ def _monkey(spheres=8, location=(-0.9, -0.6, 0.9)):
 def _inserted_monkey(spheres):
     """The test room precomputed at draft, Suzanne inserted as a moving object by Update:
     (scene, Suzanne)."""
-    _addon()
+    addon()
     build_scene()
     scene = bpy.context.scene
     scene.relight.preset = "draft"
@@ -68,7 +68,7 @@ def _inserted_monkey(spheres):
 
 @pytest.fixture(scope="module")
 def room():
-    _addon()
+    addon()
     build_scene()
     bpy.context.scene.relight.preset = "draft"
     bpy.context.scene.relight.settle = False     # the spheres' shadows everywhere (see below)
@@ -392,7 +392,7 @@ def test_a_lamp_added_after_a_moving_object_is_shadowed_by_it():
     """A virtual lamp inserted after a moving object gets the object's sphere shadow too (its
     map's shadow factor wired to the spheres), and the relit materials are wired again after an
     Update that rebuilt them."""
-    _addon()
+    addon()
     build_scene()
     bpy.context.scene.relight.preset = "draft"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
@@ -419,7 +419,7 @@ def test_a_lamp_added_after_a_moving_object_is_shadowed_by_it():
 def test_undo_and_redo_an_inserted_moving_object():
     """Undo after the Update that inserted a moving object takes its shadow out of the relit
     materials; redo brings it back (undo steps pushed around each call, as the UI does)."""
-    _addon()
+    addon()
     build_scene()
     bpy.context.scene.relight.preset = "draft"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}

@@ -2,11 +2,9 @@
 relight.precompute's refusal of a scene over the memory limit (the estimate itself:
 test_memory_estimate.py).
 
-The add-on is registered as in test_precompute_operator.py (importlib, package ``relight_ext``)
-and its scene builder is reused for the precompute check.
+The add-on is registered from the checkout (helpers.blender, package ``relight_ext``) and the
+suite's test room (helpers.room) is used for the precompute check.
 """
-import os
-import sys
 
 import numpy as np
 import pytest
@@ -14,8 +12,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("xatlas")
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import test_precompute_operator as tpo  # noqa: E402
+from helpers.blender import PKG, addon  # noqa: E402
+from helpers.room import build_scene  # noqa: E402
 
 
 CUBE_V = [(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]
@@ -71,7 +69,7 @@ def _coverage(tris, res=256):
 
 @pytest.fixture
 def scene():
-    tpo._addon()
+    addon()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     yield bpy.context.scene
 
@@ -133,12 +131,12 @@ def test_unwrap_only_selected_and_idempotent(scene):
 
 
 def test_precompute_refused_over_memory_limit(scene):
-    tpo.build_scene()
-    addon = bpy.context.preferences.addons.get(tpo.PKG)
+    build_scene()
+    addon = bpy.context.preferences.addons.get(PKG)
     added = addon is None
     if added:
         addon = bpy.context.preferences.addons.new()
-        addon.module = tpo.PKG
+        addon.module = PKG
     try:
         addon.preferences.memory_limit_gb = 1e-6
         counts = {k: len(getattr(bpy.data, k)) for k in ("images", "materials", "meshes", "objects")}

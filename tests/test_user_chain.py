@@ -22,11 +22,9 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-from test_virtual_lamps import (SAMPLES, SIZE, VIRTUAL, _add_point, _de, _relit,  # noqa: E402
-                                photographed_office)
-from test_virtual_lamps import relit_colour  # noqa: E402
-from test_virtual_objects import _grey_box  # noqa: E402
+from helpers.blender import add_point, grey_box, relit_colour  # noqa: E402
+from helpers.office import (SAMPLES, SIZE, VIRTUAL, office_delta_e, photographed_office,
+                            relit_office)  # noqa: E402
 
 BOX_AT = (3.6, 1.0, 0.3)
 SECOND = ((1.2, 2.6, 2.0), 80.0)        # the virtual lamp added after reopening
@@ -37,11 +35,11 @@ def _bakes(info, power):
     from scenes.bake import bake_lighting
     truth = {k: bake_lighting({j: (v if j == k else 0.0) for j, v in power.items()},
                               samples=SAMPLES, seed=1, texture_size=SIZE) for k in power}
-    v = _add_point("Virtual", VIRTUAL, 150.0)
+    v = add_point("Virtual", VIRTUAL, 150.0)
     truth["Virtual"] = bake_lighting({**{k: 0.0 for k in power}, "Virtual": 150.0},
                                      samples=SAMPLES, seed=1, texture_size=SIZE)
     bpy.data.objects.remove(v)
-    box = _grey_box(BOX_AT)
+    box = grey_box(BOX_AT)
     truth["box"] = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE,
                                  objects=info.objects)
     bpy.data.objects.remove(box)
@@ -57,7 +55,7 @@ def _photo_error(info, photo):
     """Largest difference between the relit room and the photo, relative to the texel's
     brightest channel, over the texels the surfaces' UVs cover."""
     from scenes.bake import coverage_masks
-    got = _relit(info)
+    got = relit_office(info)
     cover = coverage_masks(info.objects, SIZE)
     worst = 0.0
     for n in info.objects:
@@ -106,13 +104,14 @@ state = importlib.import_module("relight_ext.relight_addon.blender.state")
 solves = []
 solve = pipeline.solve
 pipeline.solve = lambda *a, **k: solves.append(1) or solve(*a, **k)
-from test_virtual_lamps import _add_point, _relit
+from helpers.blender import add_point
+from helpers.office import relit_office
 from scenes.bake import emit_bake
 bpy.ops.wm.open_mainfile(filepath=BLEND)
 out = {"kept": state.has_kept(bpy.context.scene)}
 out["first_update"] = sorted(bpy.ops.relight.update())
 out["first_action"] = pipeline.prepare(bpy.context, "update").action
-v2 = _add_point("Second", LOC, POWER)
+v2 = add_point("Second", LOC, POWER)
 out["add"] = sorted(bpy.ops.relight.update())
 out["add_action"] = bpy.context.scene["relight_status"]["action"]
 floor = bpy.data.objects["Floor"].material_slots[0].material
@@ -123,7 +122,7 @@ out["drivers"] = {n.name: n.outputs[0].default_value for n in floor.node_tree.no
                   if n.name.startswith("I ")}
 # what a render shows: a Cycles EMIT bake of the floor's relit material against the formula
 bake = emit_bake(bpy, ["Floor"])["Floor"]
-formula = _relit(INFO)["Floor"]
+formula = relit_office(INFO)["Floor"]
 out["bake_vs_formula"] = float(np.abs(bake - formula).max() / formula.max())
 out["restore"] = sorted(bpy.ops.relight.restore_originals())
 out["restored_relit"] = bool(bpy.data.objects["Floor"].material_slots[0].material.get(
@@ -155,17 +154,17 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     bpy.context.view_layer.update()
     assert _driver("Lamp A") == pytest.approx(0.25)
     dimmed = _mix(info, truth, {"Lamp A": 0.25, "Lamp B": 1.0})
-    assert _de(info, _relit(info), dimmed) <= 1.5
+    assert office_delta_e(info, relit_office(info), dimmed) <= 1.5
     _renders_as_the_formula()
 
     # 2. a virtual lamp: its map on the kept room; the dimmed lamp keeps its photo power
-    _add_point("Virtual", VIRTUAL, 150.0)
+    add_point("Virtual", VIRTUAL, 150.0)
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert len(solves) == 1, "adding a virtual lamp solved the room again"
     assert _driver("Lamp A") == pytest.approx(0.25) and _driver("Virtual") == pytest.approx(1.0)
     assert _light("Lamp A")["relight_power0"] == pytest.approx(power["Lamp A"])
     with_v = _mix(info, truth, {"Lamp A": 0.25, "Lamp B": 1.0, "Virtual": 1.0})
-    assert _de(info, _relit(info), with_v) <= 1.5
+    assert office_delta_e(info, relit_office(info), with_v) <= 1.5
     _renders_as_the_formula()
 
     # 3. lights out, the virtual lamp alone: Update is no refusal
@@ -174,11 +173,11 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert len(solves) == 1
-    assert _de(info, _relit(info), truth["Virtual"]) <= 2.0
+    assert office_delta_e(info, relit_office(info), truth["Virtual"]) <= 2.0
     _renders_as_the_formula()
 
     # 4. a virtual object beside the virtual lamp (both orders failed once: issue 42, 1.)
-    box = _grey_box(BOX_AT)
+    box = grey_box(BOX_AT)
     box.relight_role = "virtual"
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -187,7 +186,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
         _light(k).energy = p
     _light("Virtual").energy = 0.0
     bpy.context.view_layer.update()
-    assert _de(info, _relit(info), truth["box"]) <= 1.5
+    assert office_delta_e(info, relit_office(info), truth["box"]) <= 1.5
     _renders_as_the_formula()
 
     # 5. save (photos packed), reopen in a fresh process, go on there
@@ -223,7 +222,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     assert out["back_action"] == "none"
 
     # the same second lamp in this session gives the reopened file's map
-    _add_point("Second", *SECOND)
+    add_point("Second", *SECOND)
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert len(solves) == 1
     m = bpy.data.objects["Floor"].material_slots[0].material.node_tree.nodes["M Second"].image

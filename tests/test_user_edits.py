@@ -1,74 +1,55 @@
 """A user's own edits of a relit file (issue 44: 1, 6, 7, 8), through the operators, on the test
-room of ``test_precompute_operator`` at draft.
+room of ``helpers.room`` at draft.
 
 Truth: the relit formula on the written images (T x sum_k I_k M_k, the drivers' values), the
 photo (at the photo's powers the relit room is the photo), the user's data as it was, and how
 many times the room was solved (a rename, a deletion or a duplicate of a lamp needs no solve).
 """
-import importlib
 import os
-import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_data_safety import _module, _pack_all  # noqa: E402
-from test_precompute_operator import _pixels, build_scene  # noqa: E402
-from test_virtual_lamps import relit_colour  # noqa: E402
+from helpers.blender import addon_module, pack_all, pixels, relit_now  # noqa: E402
 
 
 @pytest.fixture
-def room(monkeypatch):
+def room(test_room, count_solves):
     """The test room precomputed at draft; ``solves`` counts the room's solves since."""
-    _module("operators")
-    build_scene()
-    _pack_all()
-    bpy.context.scene.relight.preset = "draft"
+    pack_all()
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
-    pipeline = _module("relight_addon.blender.pipeline")
-    solves = []
-    solve = pipeline.solve
-    monkeypatch.setattr(pipeline, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
-    return solves
-
-
-def _floor():
-    """The floor's relit colour: T x sum_k I_k M_k from its material's images and drivers."""
-    bpy.context.view_layer.update()
-    return relit_colour("Floor")
+    return count_solves()
 
 
 def _photo_floor():
     from relight_addon.core.texture.colour import srgb_to_linear
-    return srgb_to_linear(_pixels(bpy.data.images["Floor_mat_img"])[..., :3].astype(np.float64))
+    return srgb_to_linear(pixels(bpy.data.images["Floor_mat_img"])[..., :3].astype(np.float64))
 
 
 def _status():
-    return _module("relight_addon.blender.state").status(bpy.context.scene)
+    return addon_module("relight_addon.blender.state").status(bpy.context.scene)
 
 
 def test_a_renamed_photographed_lamp_stays_that_lamp(room):
     """Renamed, the lamp of the photo keeps its map (it does not become a virtual lamp: the room
     came out 3.8x too bright); renamed and off, its light goes."""
     photo = _photo_floor()
-    np.testing.assert_allclose(_floor(), photo, rtol=5e-3, atol=1e-4)
+    np.testing.assert_allclose(relit_now("Floor"), photo, rtol=5e-3, atol=1e-4)
     bpy.data.objects["LampA"].name = "Desk lamp"
     bpy.data.objects["Desk lamp"].data.name = "Desk lamp"
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert room == [], "a rename solved the room again"
     st = _status()
     assert list(st["lamps"]) == ["LampA", "LampB"] and not list(st["virtual"])
-    np.testing.assert_allclose(_floor(), photo, rtol=5e-3, atol=1e-4)
+    np.testing.assert_allclose(relit_now("Floor"), photo, rtol=5e-3, atol=1e-4)
     bpy.data.objects["Desk lamp"].data.energy = 0.0
     assert bpy.ops.relight.update() == {"FINISHED"}
-    off = _floor()
+    off = relit_now("Floor")
     assert room == [] and off.mean() < 0.9 * photo.mean()
     nt = bpy.data.objects["Floor"].material_slots[0].material.node_tree
-    b_only = _pixels(nt.nodes["T"].image)[..., :3] * _pixels(nt.nodes["M LampB"].image)[..., :3]
+    b_only = pixels(nt.nodes["T"].image)[..., :3] * pixels(nt.nodes["M LampB"].image)[..., :3]
     np.testing.assert_allclose(off, b_only, rtol=1e-5)
 
 
@@ -84,13 +65,13 @@ def test_a_deleted_photographed_lamp_is_a_lamp_switched_off(room):
     st = _status()
     assert list(st["gone"]) == ["LampA"]
     assert any("LampA" in w and "deleted" in w for w in st["warnings"])
-    lines = _module("panels.main").lamp_lines(bpy.context.scene)
+    lines = addon_module("panels.main").lamp_lines(bpy.context.scene)
     assert any("LampA" in head and "deleted" in head for head, _, _ in lines)
     nt = bpy.data.objects["Floor"].material_slots[0].material.node_tree
     assert nt.nodes["I LampA"].outputs[0].default_value == 0.0
-    b_only = _pixels(nt.nodes["T"].image)[..., :3] * _pixels(nt.nodes["M LampB"].image)[..., :3]
-    np.testing.assert_allclose(_floor(), b_only, rtol=1e-5)
-    assert _floor().mean() < 0.9 * photo.mean()
+    b_only = pixels(nt.nodes["T"].image)[..., :3] * pixels(nt.nodes["M LampB"].image)[..., :3]
+    np.testing.assert_allclose(relit_now("Floor"), b_only, rtol=1e-5)
+    assert relit_now("Floor").mean() < 0.9 * photo.mean()
     # the light comes back (as an undo would bring it): it is the lamp of the photo again
     back = bpy.data.objects.new("LampA", data)
     back["relight_uid"] = st["lamp_records"][0]["uid"]
@@ -98,7 +79,7 @@ def test_a_deleted_photographed_lamp_is_a_lamp_switched_off(room):
     bpy.context.scene.collection.objects.link(back)
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert room == [] and not list(_status()["gone"])
-    np.testing.assert_allclose(_floor(), photo, rtol=5e-3, atol=1e-4)
+    np.testing.assert_allclose(relit_now("Floor"), photo, rtol=5e-3, atol=1e-4)
 
 
 def test_a_duplicated_lamp_is_a_new_virtual_lamp(room):
@@ -163,7 +144,7 @@ def test_two_scenes_sharing_objects_keep_their_own_results(room):
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     assert sorted(m.name for m in bpy.data.materials
                   if m.get("relight_scene") == first["relight_id"]) == mats_first
-    st = _module("relight_addon.blender.state").status(second)
+    st = addon_module("relight_addon.blender.state").status(second)
     assert any("also in scene" in w for w in st["warnings"])
     assert bpy.ops.relight.clear() == {"FINISHED"}
     assert sorted(m.name for m in bpy.data.materials
@@ -178,7 +159,7 @@ def test_two_scenes_sharing_objects_keep_their_own_results(room):
 def test_a_damaged_or_foreign_kept_solution_is_not_used(room, tmp_path):
     """The kept solution is verified: another run's, or a damaged one, is ignored (Update then
     solves again), never read into a wrong result."""
-    state = _module("relight_addon.blender.state")
+    state = addon_module("relight_addon.blender.state")
     blend = str(tmp_path / "kept.blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend)
     bpy.ops.wm.open_mainfile(filepath=blend)
@@ -203,8 +184,8 @@ def test_a_damaged_or_foreign_kept_solution_is_not_used(room, tmp_path):
 
 
 def test_the_preference_leaves_the_solution_out_of_the_file(room, tmp_path):
-    prefs = _module("preferences")
-    state = _module("relight_addon.blender.state")
+    prefs = addon_module("preferences")
+    state = addon_module("relight_addon.blender.state")
     sizes = {}
     for keep in (True, False):
         state.attach(lambda keep=keep: prefs.DEFAULT_KEEP_LIMIT_MB * 2**20 if keep else 0)
@@ -255,7 +236,7 @@ def test_the_panels_draw_at_every_stage(room, tmp_path):
     precompute, after it, with a virtual object selected and after a lamp was deleted; no line
     is longer than a sidebar holds."""
     from types import SimpleNamespace
-    panels = _module("panels.main")
+    panels = addon_module("panels.main")
 
     def draw_all():
         log = []

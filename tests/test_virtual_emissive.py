@@ -2,21 +2,17 @@
 "virtual" is a lamp that is not in the photo.  Update gives it a map with the room's shadows
 and interreflections; its light is added to the relit room, following the emission Strength.
 
-Truth: the demo office of test_virtual_lamps (24 texels, 512-sample Cycles bakes), baked with
+Truth: the demo office of helpers.office (24 texels, 512-sample Cycles bakes), baked with
 the true albedo and the panel alone (real lamps off), before the room is "photographed".
 """
-import os
-import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from test_precompute_operator import _pixels  # noqa: E402
-from test_virtual_lamps import SIZE, SAMPLES, _de, _relit, photographed_office  # noqa: E402
+from helpers.blender import pixels  # noqa: E402
+from helpers.office import (SAMPLES, SIZE, office_delta_e, photographed_office, relit_office)  # noqa: E402
 
 STRENGTH = 12.0            # Emission strength (radiance) of the panel
 
@@ -41,8 +37,7 @@ def _panel():
     return obj
 
 
-def test_virtual_emissive_panel_against_cycles(monkeypatch):
-    import importlib
+def test_virtual_emissive_panel_against_cycles(count_solves):
     from scenes.bake import bake_lighting
 
     def panel_alone(info, power):
@@ -56,13 +51,10 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
 
     def textures():
-        return {n: float(_pixels(bpy.data.objects[n].material_slots[0].material.node_tree
+        return {n: float(pixels(bpy.data.objects[n].material_slots[0].material.node_tree
                                  .nodes["T"].image)[..., :3].mean()) for n in info.objects}
     before = textures()
-    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
-    solves = []
-    solve = ops.solve
-    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solves = count_solves()
     panel = _panel()
     panel.relight_role = "virtual"
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -81,8 +73,8 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
     assert name in list(st["lamps"])
     for k in power:                                           # the real lamps off
         bpy.data.lights[k].energy = 0.0
-    got = _relit(info)
-    d = _de(info, got, truth)
+    got = relit_office(info)
+    d = office_delta_e(info, got, truth)
     for n in info.objects:
         g, w = np.mean(got[n]), float(np.mean(np.asarray(truth[n], np.float64)))
         print(f"  {n}: relit {g:.4f} truth {w:.4f} ({100 * (g / max(w, 1e-12) - 1):+.1f} %)")
@@ -104,24 +96,24 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
     glow = bpy.data.materials["PanelGlow"]
     glow.node_tree.nodes["Emission"].inputs["Strength"].default_value = 2 * STRENGTH
     bpy.context.view_layer.update()
-    doubled = _relit(info)
+    doubled = relit_office(info)
     assert float(np.mean(doubled["Floor"])) == pytest.approx(2 * floor_got, rel=1e-6)
     glow.node_tree.nodes["Emission"].inputs["Strength"].default_value = STRENGTH
     bpy.context.view_layer.update()
     # with the real lamps back on, the photo's light is there again and the panel's is added
     for k, p in power.items():
         bpy.data.lights[k].energy = p
-    both = _relit(info)
+    both = relit_office(info)
     assert np.mean(both["Floor"]) > floor_got
     # moving the panel makes its map again on the kept room; deleting it removes its map
     floor_map = mat.node_tree.nodes[f"M {name}"].image
-    at_first = _pixels(floor_map).copy()
+    at_first = pixels(floor_map).copy()
     panel.location = (1.2, 2.6, 2.3)
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert solves == []
     mat = bpy.data.objects["Floor"].material_slots[0].material     # Update writes it again
-    moved = _pixels(mat.node_tree.nodes[f"M {name}"].image)
+    moved = pixels(mat.node_tree.nodes[f"M {name}"].image)
     assert np.abs(moved - at_first).max() > 0.1 * np.abs(at_first).max()
     glow_mat = panel.material_slots[0].material
     bpy.data.objects.remove(panel)
@@ -134,22 +126,21 @@ def test_virtual_emissive_panel_against_cycles(monkeypatch):
     assert name not in list(bpy.context.scene["relight_status"]["lamps"])
 
 
-def test_a_virtual_lamp_undoes_and_redoes(monkeypatch):
+def test_a_virtual_lamp_undoes_and_redoes(count_solves):
     """Undo after the Update that inserted a virtual lamp gives the room's materials and maps
     back (no map of it left), redo gives its map back; an Update after the undo starts from
     the room's result again (no new solve) and gives the same maps."""
-    import importlib
-    from test_virtual_lamps import _add_point
-    from test_virtual_objects import _images
+    from helpers.blender import add_point
+    from helpers.office import map_images
     info, *_ = photographed_office(lambda info, power: None)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    room = _images(info)
+    room = map_images(info)
     bpy.ops.ed.undo_push(message="precomputed")
-    _add_point("Virtual", (3.8, 1.0, 1.6), 150.0)
+    add_point("Virtual", (3.8, 1.0, 1.6), 150.0)
     bpy.ops.ed.undo_push(message="lamp added")
     assert bpy.ops.relight.update() == {"FINISHED"}
     bpy.ops.ed.undo_push(message="updated")
-    with_lamp = _images(info)
+    with_lamp = map_images(info)
     assert len(with_lamp) > len(room)                 # its own map on every relit surface
 
     def floor_nodes():
@@ -157,20 +148,17 @@ def test_a_virtual_lamp_undoes_and_redoes(monkeypatch):
     assert "M Virtual" in floor_nodes()
     bpy.ops.ed.undo()
     assert "M Virtual" not in floor_nodes()
-    assert _images(info).keys() == room.keys()
-    assert all(np.array_equal(room[n], a) for n, a in _images(info).items())
+    assert map_images(info).keys() == room.keys()
+    assert all(np.array_equal(room[n], a) for n, a in map_images(info).items())
     assert "Virtual" in bpy.data.objects              # the lamp itself is still there
     bpy.ops.ed.redo()
     assert "M Virtual" in floor_nodes()
-    assert all(np.array_equal(with_lamp[n], a) for n, a in _images(info).items())
+    assert all(np.array_equal(with_lamp[n], a) for n, a in map_images(info).items())
     bpy.ops.ed.undo()
-    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
-    solves = []
-    solve = ops.solve
-    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solves = count_solves()
     assert bpy.ops.relight.update() == {"FINISHED"}   # after the undo: the lamp again
     assert solves == []
-    got = _images(info)
+    got = map_images(info)
     assert "M Virtual" in floor_nodes()
     for n, a in with_lamp.items():
         assert np.allclose(got[n], a, atol=1e-5), n

@@ -17,32 +17,9 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-from test_precompute_operator import _addon, _pixels  # noqa: E402
-
-SIZE = 24
-SAMPLES = 512
-LUM = np.array([0.2126, 0.7152, 0.0722])
-VIRTUAL = (3.8, 1.0, 1.6)
-
-
-def photographed_office(true_albedo_bakes):
-    """The test office: its photo (both real lamps, seed 0), then ``true_albedo_bakes(info,
-    power)`` (Cycles truth baked on the true albedo, before the room is "photographed"), then
-    the photographed room with the medium preset set.  Returns (info, power, truth, photo)."""
-    from scenes.bake import bake_lighting
-    from scenes.office import build_office
-    sys.path.insert(0, ROOT)
-    from demo.office import make_photographed
-    _addon()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    info = build_office(seed=0, n_lamps=2, texture_size=SIZE)
-    power = dict(info.lamp_powers)
-    photo = bake_lighting(power, samples=SAMPLES, seed=0, texture_size=SIZE)
-    truth = true_albedo_bakes(info, power)
-    make_photographed(bpy, info, photo)
-    bpy.context.scene.relight.preset = "medium"
-    return info, power, truth, photo
+from helpers.blender import add_point, pixels  # noqa: E402
+from helpers.office import (SAMPLES, SIZE, VIRTUAL, office_delta_e, photographed_office,
+                            relit_office)  # noqa: E402
 
 
 def _office():
@@ -52,55 +29,12 @@ def _office():
         truth = {k: bake_lighting({j: (v if j == k else 0.0) for j, v in power.items()},
                                   samples=SAMPLES, seed=1, texture_size=SIZE) for k in power}
         # the virtual light's truth
-        v = _add_point("Virtual", VIRTUAL, 150.0)
+        v = add_point("Virtual", VIRTUAL, 150.0)
         truth["Virtual"] = bake_lighting({**{k: 0.0 for k in power}, "Virtual": 150.0},
                                          samples=SAMPLES, seed=1, texture_size=SIZE)
         bpy.data.objects.remove(v)
         return truth
     return photographed_office(bakes)[:3]
-
-
-def _add_point(name, location, energy):
-    """A point light of radius 0.1 m (the scene's lamps are read as they are)."""
-    light = bpy.data.lights.new(name, "POINT")
-    light.energy = energy
-    light.shadow_soft_size = 0.1
-    obj = bpy.data.objects.new(name, light)
-    obj.location = location
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.update()
-    return obj
-
-
-def _relit(info):
-    """{object: relit colour} from the relit materials' images and their drivers' values."""
-    bpy.context.view_layer.update()
-    return {name: relit_colour(name) for name in info.objects}
-
-
-def relit_colour(name):
-    """T x sum_k I_k M_k of object ``name``'s (first) relit material: its images times its
-    drivers' present values, as a render shows it (drivers evaluated at the last update)."""
-    nt = bpy.data.objects[name].material_slots[0].material.node_tree
-    t = _pixels(nt.nodes["T"].image)[..., :3].astype(np.float64)
-    total = 0.0
-    for node in nt.nodes:
-        if node.name.startswith("M "):
-            total = total + nt.nodes[f"I {node.name[2:]}"].outputs[0].default_value * \
-                _pixels(node.image)[..., :3]
-    return t * total
-
-
-def _de(info, got, want):
-    from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
-    from scenes.office import office_geometry  # noqa: F401  (coverage from the albedo's size)
-    g = np.concatenate([got[n].reshape(-1, 3) for n in info.objects])
-    w = np.concatenate([np.asarray(want[n], np.float64).reshape(-1, 3) for n in info.objects])
-    lit = w @ LUM > 0
-    white = np.percentile(w[lit] @ LUM, 99)
-    d = delta_e_2000(linear_rgb_to_lab(np.clip(g[lit] / white, 0, None)),
-                     linear_rgb_to_lab(np.clip(w[lit] / white, 0, None)))
-    return float(d.mean())
 
 
 @pytest.fixture(scope="module")
@@ -115,7 +49,7 @@ def test_virtual_point_lamp_against_cycles(office):
     import time
     info, power, truth = office
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    v = _add_point("Virtual", VIRTUAL, 150.0)
+    v = add_point("Virtual", VIRTUAL, 150.0)
     t0 = time.perf_counter()
     assert bpy.ops.relight.update() == {"FINISHED"}
     seconds = time.perf_counter() - t0
@@ -124,10 +58,10 @@ def test_virtual_point_lamp_against_cycles(office):
     truth_v = truth["Virtual"]
     for k in power:                                              # real lamps off
         bpy.data.lights[k].energy = 0.0
-    off = _de(info, _relit(info), truth_v)
+    off = office_delta_e(info, relit_office(info), truth_v)
     for k, p in power.items():
         bpy.data.lights[k].energy = p
-    on = _de(info, _relit(info), {n: truth_v[n] + sum(truth[k][n] for k in power)
+    on = office_delta_e(info, relit_office(info), {n: truth_v[n] + sum(truth[k][n] for k in power)
                                   for n in info.objects})
     print(f"virtual point lamp: real lamps off {off:.2f}, on {on:.2f} CIEDE2000; Update {seconds:.2f} s")
     assert off <= 2.0 and on <= 1.5, (off, on)
@@ -135,9 +69,9 @@ def test_virtual_point_lamp_against_cycles(office):
     # moving it and pressing Update recomputes it; deleting it removes its map
     v.location.x -= 1.0
     bpy.context.view_layer.update()
-    before = _pixels(bpy.data.images["Floor photo.relight.Virtual"]).copy()
+    before = pixels(bpy.data.images["Floor photo.relight.Virtual"]).copy()
     assert bpy.ops.relight.update() == {"FINISHED"}
-    assert not np.allclose(_pixels(bpy.data.images["Floor photo.relight.Virtual"]), before)
+    assert not np.allclose(pixels(bpy.data.images["Floor photo.relight.Virtual"]), before)
     bpy.data.objects.remove(v)
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -162,7 +96,7 @@ def test_virtual_lamp_in_place_of_a_real_one(office):
     for k in power:
         bpy.data.lights[k].energy = 0.0
     bpy.data.lights["Lamp A"].energy = 0.0
-    d = _de(info, _relit(info), truth["Lamp A"])
+    d = office_delta_e(info, relit_office(info), truth["Lamp A"])
     for k, p in power.items():
         bpy.data.lights[k].energy = p
     bpy.data.objects.remove(twin)
@@ -196,7 +130,7 @@ def test_virtual_lamp_survives_save_and_reopen(office, tmp_path):
     import json
     info, power, truth = office
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    v = _add_point("Virtual", VIRTUAL, 150.0)
+    v = add_point("Virtual", VIRTUAL, 150.0)
     assert bpy.ops.relight.update() == {"FINISHED"}
     for im in bpy.data.images:
         if im.packed_file is None and len(im.pixels):

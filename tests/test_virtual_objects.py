@@ -15,17 +15,8 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-from test_virtual_lamps import SIZE, SAMPLES, LUM, _relit, photographed_office  # noqa: E402
-from scenes.materials import grey_diffuse  # noqa: E402
-
-
-def _grey_box(location, size=0.6):
-    bpy.ops.mesh.primitive_cube_add(size=size, location=location)
-    box = bpy.context.active_object
-    box.name = "VBox"
-    box.data.materials.append(grey_diffuse(bpy))
-    return box
+from helpers.blender import grey_box  # noqa: E402
+from helpers.office import (LUM, SAMPLES, SIZE, map_images, photographed_office, relit_office)  # noqa: E402
 
 
 def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
@@ -33,20 +24,20 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
     from scenes.bake import bake_lighting
 
     def with_the_box(info, power):
-        box = _grey_box((3.6, 1.0, 0.3))
+        box = grey_box((3.6, 1.0, 0.3))
         truth = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE,
                               objects=info.objects)
         bpy.data.objects.remove(box)
         return truth
     info, power, truth, photo = photographed_office(with_the_box)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    ignoring = _relit(info)
-    box = _grey_box((3.6, 1.0, 0.3))
+    ignoring = relit_office(info)
+    box = grey_box((3.6, 1.0, 0.3))
     box.relight_role = "virtual"
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert not box.material_slots[0].material.get("relight_generated")    # not relit
-    with_box = _relit(info)
+    with_box = relit_office(info)
     names = info.objects
     want = np.concatenate([np.asarray(truth[n], np.float64).reshape(-1, 3) for n in names])
     ph = np.concatenate([np.asarray(photo[n], np.float64).reshape(-1, 3) for n in names])
@@ -70,57 +61,37 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
     box.relight_role = "ignored"
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
-    back = de(_relit(info))
+    back = de(relit_office(info))
     assert abs(back[shadow].mean() - d_without[shadow].mean()) < 0.25 * d_without[shadow].mean()
 
 
-def _images(info):
-    """The relit materials' map images of the office's surfaces (every mesh when ``info`` is
-    None), as float arrays by name."""
-    out = {}
-    names = info.objects if info is not None else \
-        [o.name for o in bpy.data.objects if o.type == "MESH"]
-    for name in names:
-        for slot in bpy.data.objects[name].material_slots:
-            for node in slot.material.node_tree.nodes:
-                image = getattr(node, "image", None)
-                if image is not None and ".relight." in image.name:
-                    px = np.empty(len(image.pixels), np.float32)
-                    image.pixels.foreach_get(px)
-                    out[image.name] = px
-    return out
-
-
-def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(monkeypatch):
+@pytest.mark.slow
+def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(count_solves):
     """Update inserts, moves and deletes a virtual object without solving the room again (the
     last result of the room alone is kept); what it writes is what a Precompute from scratch
     writes for the same scene, and deleting the object gives the room's maps back exactly."""
-    import importlib
     info, *_ = photographed_office(lambda info, power: None)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    room = _images(info)
+    room = map_images(info)
     assert room
-    ops = importlib.import_module("relight_ext.relight_addon.blender.pipeline")
-    solves = []
-    solve = ops.solve
-    monkeypatch.setattr(ops, "solve", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    solves = count_solves()
 
-    box = _grey_box((2.7, 3.2, 0.3))
+    box = grey_box((2.7, 3.2, 0.3))
     box.relight_role = "virtual"
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
-    first = _images(info)
+    first = map_images(info)
     changed = [n for n in room if not np.array_equal(room[n], first[n])]
     assert changed, "the box changed no map"
     box.location.x += 0.4
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
-    moved = _images(info)
+    moved = map_images(info)
     assert solves == [], "Update solved the room again for a virtual object"
     assert any(not np.array_equal(first[n], moved[n]) for n in changed)
 
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}      # from scratch
-    scratch = _images(info)
+    scratch = map_images(info)
     assert solves == [1]
     for n in room:
         assert np.allclose(moved[n], scratch[n], rtol=1e-4, atol=1e-6), n
@@ -129,7 +100,7 @@ def test_update_adds_moves_and_deletes_a_virtual_object_on_the_kept_room(monkeyp
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert solves == [1]
-    gone = _images(info)
+    gone = map_images(info)
     for n in room:
         assert np.array_equal(gone[n], room[n]), n
 
@@ -142,25 +113,25 @@ import bpy
 from scenes.addon import register_repo_addon
 register_repo_addon()
 bpy.ops.wm.open_mainfile(filepath=BLEND)
-from test_virtual_objects import _images
+from helpers.office import map_images
 scene = bpy.context.scene
 out = {"objects_saved": bool(scene["relight_status"].get("objects"))}
 z = np.load(MAPS)
 saved = {n: z["with_" + str(i)] for i, n in enumerate(z["names"])}
 room = {n: z["room_" + str(i)] for i, n in enumerate(z["names"])}
 names = [str(n) for n in z["names"]]
-now = {n: a for n, a in _images(None).items()}
+now = {n: a for n, a in map_images(None).items()}
 out["reopened_as_saved"] = all(np.array_equal(now[n], saved[n]) for n in names)
 box = bpy.data.objects["VBox"]
 box.location.x += 0.4
 bpy.context.view_layer.update()
 out["move"] = sorted(bpy.ops.relight.update())
-moved = _images(None)
+moved = map_images(None)
 out["moved_changed"] = sorted(n for n in names if not np.array_equal(moved[n], saved[n]))
 bpy.data.objects.remove(box)
 bpy.context.view_layer.update()
 out["delete"] = sorted(bpy.ops.relight.update())
-gone = _images(None)
+gone = map_images(None)
 out["room_back"] = max(float(np.abs(gone[n] - room[n]).max()) for n in names)
 print("RELIGHT_REOPEN_JSON " + json.dumps(out))
 """
@@ -174,20 +145,20 @@ def test_an_exact_object_undoes_and_survives_save_and_reopen(tmp_path):
     import subprocess
     info, *_ = photographed_office(lambda info, power: None)
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
-    room = _images(info)
+    room = map_images(info)
     bpy.ops.ed.undo_push(message="precomputed")
-    box = _grey_box((2.7, 3.2, 0.3))
+    box = grey_box((2.7, 3.2, 0.3))
     box.relight_role = "virtual"
     bpy.context.view_layer.update()
     bpy.ops.ed.undo_push(message="box added")
     assert bpy.ops.relight.update() == {"FINISHED"}
     bpy.ops.ed.undo_push(message="updated")
-    with_box = _images(info)
+    with_box = map_images(info)
     assert any(not np.array_equal(room[n], with_box[n]) for n in room)
     bpy.ops.ed.undo()
-    assert all(np.array_equal(room[n], a) for n, a in _images(info).items())
+    assert all(np.array_equal(room[n], a) for n, a in map_images(info).items())
     bpy.ops.ed.redo()
-    assert all(np.array_equal(with_box[n], a) for n, a in _images(info).items())
+    assert all(np.array_equal(with_box[n], a) for n, a in map_images(info).items())
 
     names = sorted(room)
     maps = str(tmp_path / "maps.npz")

@@ -92,13 +92,13 @@ def key_path(obj, matrices, frames):
         obj.keyframe_insert(rot_path, frame=int(f))
     ad = obj.animation_data
     action = ad.action if ad is not None else None
-    for fc in _fcurves(obj, action):
+    for fc in fcurves(obj, action):
         if fc.data_path in ("location", rot_path):
             for kp in fc.keyframe_points:      # keys of this object's two channels
                 kp.interpolation = "LINEAR"
 
 
-def _fcurves(obj, action):
+def fcurves(obj, action):
     """F-curves of ``obj`` in ``action`` (Blender 4.4+ layered actions, or the legacy list)."""
     if action is None:
         return []

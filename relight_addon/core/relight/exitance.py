@@ -338,19 +338,19 @@ def edge_fit(sol, tm, photo, scale, texel_light, on, folds=0, indirect=True) -> 
     if indirect:          # the surfaces' vote at the current ratios (VOTE_*), not the pooled fit
         D_sum, I_sum, stm = D.sum(axis=0), I.sum(axis=0), light.solution_texels
         per_patch = np.bincount(tm.patch)
-        g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, stm, a, b, per_patch, fallback=g)
+        g, sigma_vote = vote_g(D_sum, I_sum, dlog_t, stm, a, b, per_patch, fallback=g)
         if not np.isfinite(sigma_vote):
             # pieces too small to vote (a fine proxy's triangles): cells of space vote, not
             # whole surfaces, where one region's contact shadows would decide
             cells = SimpleNamespace(patch=np.zeros(len(stm.patch), np.int64), u=stm.u, v=stm.v)
-            cells.patch[a] = _space_cells(sol.scene, stm, a, per_patch)
-            g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, cells, a, b,
+            cells.patch[a] = space_cells(sol.scene, stm, a, per_patch)
+            g, sigma_vote = vote_g(D_sum, I_sum, dlog_t, cells, a, b,
                                     np.ones(int(cells.patch.max(initial=0)) + 1), fallback=g)
         if not np.isfinite(sigma_vote):
             # too few cells either: whole surfaces (groups) vote, rather than rho^ staying
             group = np.asarray(sol.scene.group)
             by_group = SimpleNamespace(patch=group[stm.patch], u=stm.u, v=stm.v)
-            g, sigma_vote = _vote_g(D_sum, I_sum, dlog_t, by_group, a, b,
+            g, sigma_vote = vote_g(D_sum, I_sum, dlog_t, by_group, a, b,
                                     np.ones(int(group.max(initial=0)) + 1), fallback=g)
     if folds <= 1:
         return EdgeFit(t, g, np.zeros(k), 0.0, share, sigma_vote)
@@ -413,7 +413,7 @@ def edge_pairs(tm, photo):
     return pairs, np.log(lum[:, 0]) - np.log(lum[:, 1])
 
 
-def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
+def vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
     """The voted indirect weight (``fallback`` where no piece votes) and the standard error of
     its logarithm (bootstrap over the pieces, at least half a grid step; inf with fewer than
     VOTE_MIN_PIECES voting pieces) over the pairs of texels
@@ -477,7 +477,7 @@ def _vote_g(D, I, dlog_t, tm, a, b, per_patch, fallback=1.0):
     return g, max(float(medians.std()), 0.5 * h)      # no surer than half the grid's step
 
 
-def _space_cells(scene, tm, rows, per_patch):
+def space_cells(scene, tm, rows, per_patch):
     """Cells of space for the texels ``rows`` of ``tm`` (patches of ``scene``, ``per_patch``
     texels each in the whole map): the same group, facing along the same axis, in the same
     cube of VOTE_CELL_TEXELS texels a side (each patch's texel spacing, the median over them).
@@ -497,10 +497,10 @@ def _space_cells(scene, tm, rows, per_patch):
         sl = slice(c0, c0 + CELLS_CHUNK)
         cell[sl] = np.floor(bilinear_point(scene.corners[patch[sl]], u[sl], v[sl]) / size)
     columns = [np.asarray(scene.group)[patch], facing, cell[:, 0], cell[:, 1], cell[:, 2]]
-    return _row_labels(columns)
+    return row_labels(columns)
 
 
-def _row_labels(columns):
+def row_labels(columns):
     """np.unique(np.column_stack(columns), axis=0, return_inverse=True)[1] a column at a time:
     the same labels (rows in lexicographic order) without the (n, c) sorting copies (107 MB
     for a photo-resolution map's million pairs)."""
