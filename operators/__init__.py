@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import dependencies, eevee, lamps, precompute, settings, settle, unwrap
+from . import ar, dependencies, eevee, lamps, precompute, settings, settle, unwrap
 
-_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle)
+_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle, ar)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 

@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import main
+from . import ar, main
 
-_modules = (main,)
+_modules = (main, ar)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
