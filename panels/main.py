@@ -76,7 +76,15 @@ def lamp_lines(scene):
     for j, name in enumerate(st["lamps"]):
         record = records[j] if j < len(records) else {}
         obj = state.find_light(scene, record) if record.get("uid") else None
-        if record.get("kind", "light") == "light" and obj is None and record:
+        strength = record.get("strength") or {}
+        if record.get("kind") == "emissive" and strength.get("node"):
+            mat = bpy.data.materials.get(record.get("material") or "")
+            node = mat.node_tree.nodes.get(strength["node"]) if mat and mat.node_tree else None
+            sock = node.inputs.get(strength["input"]) if node is not None else None
+            s0 = float(strength.get("value", 0.0))
+            now = f"now at {sock.default_value / s0:.2f}x" if sock is not None and s0 > 0 \
+                else "fixed"
+        elif record.get("kind", "light") == "light" and obj is None and record:
             now = "deleted: off"
         elif obj is not None and float(record.get("p0", 0.0)) > 0:
             now = f"now at {obj.data.energy / float(record['p0']):.2f}x"

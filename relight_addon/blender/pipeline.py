@@ -95,6 +95,7 @@ class Job:
     reuse: object = None             # the solution whose mesh and links a "reuse" keeps
     drop: list = field(default_factory=list)    # virtual lamp labels whose maps are made again
     add: list = field(default_factory=list)     # virtual lamp labels whose maps are made
+    note: str = ""                   # why the room is solved again when it might not have been
     t0: float = field(default_factory=time.perf_counter)
 
     @property
@@ -160,7 +161,9 @@ def _check_read(data, report):
         why = (uv + images)[:2]
         raise PipelineError("No face uses an image texture: nothing to relight"
                             + (f" ({'; '.join(why)})" if why else "")
-                            + (": Unwrap Missing UVs gives the meshes a UV map" if uv else ""))
+                            + (": the photo textures need the UV maps they were made with "
+                               "(import the model with its UVs; Unwrap Missing UVs makes new ones, "
+                               "for photos projected on the model afterwards)" if uv else ""))
     textured = {report.sources.get(report.groups[int(g)][0], report.groups[int(g)][0])
                 for g in set(data.group[data.image >= 0].tolist())}
     objs = [bpy.data.objects.get(n) for n in textured]
@@ -253,7 +256,10 @@ def _decide(scene, job, st):
     new = job.parts
     if not old or st.get("preset") != job.preset or st.get("correction") != job.correction:
         return
-    kept = state.last_result(scene)
+    # (the kept solution is read only where a path starts from it: after reopening, an Update
+    # that changes nothing reads nothing)
+    def kept():
+        return state.last_result(scene)
     virtual = {r["label"] for r in job.records if r.get("virtual")}
     real = {r["label"] for r in job.records if not r.get("virtual")}
     present = set(new["lamps"])
@@ -262,9 +268,10 @@ def _decide(scene, job, st):
     if new["geometry"] != old.get("geometry") or moved_real:
         return                                          # a new solve
     if new["surfaces"] != old.get("surfaces"):
-        if kept is not None and kept.options.mode != "element" and \
-                kept.options.proxy_faces == job.proxy_faces and not set(real) - present:
-            job.action, job.reuse = "reuse", kept.solution
+        result = kept()
+        if result is not None and result.options.mode != "element" and \
+                result.options.proxy_faces == job.proxy_faces and not set(real) - present:
+            job.action, job.reuse = "reuse", result.solution
         return
     new_virtual = {n for n in present if n not in real}
     changed = {n for n in new_virtual if new["lamps"][n] != old_lamps.get(n)}
@@ -276,18 +283,24 @@ def _decide(scene, job, st):
         return
     gone = sorted(real - present)
     if changed or removed or objects:
-        room = None if kept is None else (kept.room if kept.room is not None else
-                                          (None if st.get("objects") else kept))
+        result = kept()
+        room = None if result is None else (result.room if result.room is not None else
+                                            (None if st.get("objects") else result))
         if room is None or room.denominator is None:
-            return                                      # nothing kept to start from: solve
+            # nothing kept to start from: solve, and say why
+            job.note = state.kept_problem(scene) or (
+                "no solution of the last run is kept (the file was saved without it: add-on "
+                "preferences)" if result is None else "")
+            return
         job.action, job.base = "quick", room
         job.drop = sorted((changed | removed) & virtual)
         job.add = sorted(changed)
         return
     if gone != sorted(st.get("gone", ())) or not write.has_relight_data(scene):
-        if kept is None:
+        result = kept()
+        if result is None:
             return
-        job.action, job.base = "rewrite", kept
+        job.action, job.base = "rewrite", result
         return
     job.action = "reapply" if st.get("restored") or not materials.relit_slot_count(scene) \
         else "none"
@@ -324,6 +337,8 @@ def _records(scene, job, result):
                       "p0": float(src.get("power_ref", 1.0)),
                       "photo": float(src.get("power_photo", 0.0)),
                       "color0": list(src.get("color0", (1.0, 1.0, 1.0)))}
+            record.update(exposure=float(src.get("exposure", 0.0)),
+                          temperature=float(src.get("temperature", 0.0)))
             if src.get("kind") == "emissive":
                 # (node, input, strength then): ID properties hold no mixed lists
                 node, socket, s0 = (list(src.get("strength", ())) + [None] * 3)[:3]
@@ -337,6 +352,10 @@ def _records(scene, job, result):
                 # a duplicate (Shift D) carries its original's identity: it gets its own
                 record["uid"] = ids.give_uid(obj, fresh=bool(holders) or ids.uid(obj) in
                                              {r.get("uid") for r in job.records})
+        elif src is not None and job.solves:
+            # a new solve reads the light's exposure and temperature as they are now
+            record.update(exposure=float(src.get("exposure", 0.0)),
+                          temperature=float(src.get("temperature", 0.0)))
         obj = state.find_light(scene, record) if record.get("uid") else None
         if obj is not None:
             record["object"] = obj.name
@@ -363,7 +382,17 @@ def _lamp_terms(scene, records, warnings):
         if obj is None:
             what = "of the photo" if not r.get("virtual") else "(virtual)"
             warnings.append(f"Lamp '{r['label']}' {what} was deleted: it is off (undo the "
-                            "deletion, or add a light, to light the room again)")
+                            "deletion to have it back; a new light is a virtual lamp)")
+        elif obj is not None:
+            changed = [what for what, now, then in (
+                ("Exposure", float(getattr(obj.data, "exposure", 0.0)), r.get("exposure")),
+                ("Temperature", float(getattr(obj.data, "temperature", 0.0))
+                 if getattr(obj.data, "use_temperature", False) else 0.0, r.get("temperature")))
+                if then is not None and abs(now - float(then)) > 1e-6]
+            if changed:
+                warnings.append(f"Lamp '{r['label']}': its {' and '.join(changed)} changed since "
+                                "its map was made; the relit surfaces follow its Power and Color "
+                                "only (Precompute again to take the change)")
         terms.append(write.LampTerm(r["label"], obj, float(r["p0"]),
                                     tuple(r.get("color0") or (1.0, 1.0, 1.0)), gone=obj is None))
     return terms
@@ -381,7 +410,9 @@ def finish(context, job, result) -> Outcome:
         shown = materials.reapply(scene) if job.action == "reapply" else 0
         if shown:
             state.update_status(scene, restored=False)
-        moving = sync_spheres(context, report, state.last_result(scene))
+        from .roles import moving_objects
+        moving = sync_spheres(context, report, state.last_result(
+            scene, load=bool(moving_objects(scene))))       # (settling traces with it)
         warnings = list(report.warnings)
         if shown:
             message = f"Relight: {shown} material slot(s) show the relit materials again"
@@ -408,6 +439,10 @@ def finish(context, job, result) -> Outcome:
         for sentence in diagnose(result, result.photographed,
                                  _group_names(job.data, report, result)):
             report.warn(sentence)
+    view = scene.view_settings.view_transform
+    if view not in ("Standard", "Raw"):
+        report.warn(f"The view transform is '{view}': the relit surfaces show the photo's "
+                    "colours with 'Standard' (Render Properties > Color Management)")
     warnings = list(report.warnings)
     objects = bool(job.data.virtual.any())
     run = state.remember(scene, result)
@@ -422,6 +457,9 @@ def finish(context, job, result) -> Outcome:
     state.update_status(scene, gone=[r["label"] for r in records if r.get("gone")])
     done = (f"Relight: {summary['materials']} material(s), {summary['images']} image(s), "
             f"{summary['lamps']} lamp(s)")
+    if job.note:
+        done += f" (solved again: {job.note})"
+
     if moving["objects"]:
         done += f", {moving['objects']} moving object(s)"
     return Outcome(done, warnings, job.action, summary)

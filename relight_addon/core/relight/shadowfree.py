@@ -166,7 +166,7 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         # Virtual objects are not in the photo: the room is precomputed without them, then
         # their shadows and reflections are put into the maps (virtual.py).
         if opt.mode != "texel":
-            raise ValueError("Virtual objects need the per-texel shadow removal")
+            raise ValueError("Virtual objects need Shadow Removal 'Per Texel'")
         from .virtual import add_objects
         room = shadow_free(scene.without_virtual(), options, occluder, progress, reuse)
         return add_objects(room, scene)
@@ -241,7 +241,7 @@ def _read(scene, opt, occluder, reuse, stage, timings) -> _Run:
     else:
         if opt.mode == "element":
             raise ValueError(f"A mesh of {scene.n_patches} faces is solved on a proxy, which "
-                             "needs the per-texel shadow removal (mode 'texel')")
+                             "needs Shadow Removal 'Per Texel'")
         stage(0.015, "Placing the photos' texels on the proxy", 0.02)
         rad_scene, rad_tm = proxy.scene, texels_on(proxy, scene, tm)
         rad_occluder = proxy.scene.make_occluder() if occluder is not None else None
