@@ -19,14 +19,21 @@ def _one_line_tooltips():
             cls.bl_description = " ".join(cls.__doc__.split())
 
 
+def _ar_draw():
+    from ..relight_addon.blender import ar_draw
+    return ar_draw
+
+
 def register():
     _one_line_tooltips()
     _register()
     settings.attach()
     settle.attach()
+    _ar_draw().register_draw()          # AR mode's live viewport (nothing in background mode)
 
 
 def unregister():
+    _ar_draw().unregister_draw()
     settle.detach()
     settings.detach()
     _unregister()

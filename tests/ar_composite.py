@@ -102,13 +102,19 @@ def photo(scene, obj, hdri, res=(400, 300), samples=256):
     return {"path": png, "image": load_png(png), "mask": d["mask"]}
 
 
-def reference(kind, scene, obj, hdri, res=(400, 300), samples=256, photo_samples=256):
-    """{"image", "seconds", "cpu"}: the ``truth`` or the ``catcher`` composite."""
+def reference(kind, scene, obj, hdri, res=(400, 300), samples=256, photo_samples=256,
+              placements=None):
+    """{"image", "seconds", "cpu"[, "mask"]}: the ``truth`` or the ``catcher`` composite;
+    ``placements``: [{"radius", "centre"}] spheres in place of the scene's object (then
+    "mask" is their coverage)."""
     p = photo(scene, obj, hdri, res, photo_samples)
     key = dict(_scene_key(scene, obj, hdri, res, samples), kind=kind,
                photo=photo_samples)
-    base = _run({"kind": kind, "scene": scene, "object": obj, "hdri": hdri, "res": list(res),
-                 "samples": samples, "photo": p["path"]}, key)
+    args = {"kind": kind, "scene": scene, "object": obj, "hdri": hdri, "res": list(res),
+            "samples": samples, "photo": p["path"]}
+    if placements:
+        key["placements"] = args["placements"] = placements
+    base = _run(args, key)
     return dict(np.load(base + ".npz"))
 
 
@@ -128,6 +134,26 @@ def ours(scene, obj, hdri, res=(400, 300), engine="CYCLES", samples=32, photo_sa
         args["save"] = save
     base = _run(args, key)
     return dict(np.load(base + ".npz"))
+
+
+def chain(scene, obj, hdri, move, second, res=(400, 300), samples=32, photo_samples=256):
+    """Set up on the photo's scene, move the object by ``move``, render ("moved"), add a second
+    object (a sphere ``second``: {"radius", "centre"}), Update, render ("second"), save;
+    then the saved file opened in a fresh process and rendered ("reopened"): a dict of the
+    three images and the timings."""
+    p = photo(scene, obj, hdri, res, photo_samples)
+    key = dict(_scene_key(scene, obj, hdri, res, samples), kind="chain", engine="CYCLES",
+               photo=photo_samples, move=list(move), second=second, code=_files_hash(CODE))
+    h = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:24]
+    blend = os.path.join(cache_dir(), f"ar_comp_chain_{h}.blend")
+    args = {"kind": "chain", "scene": scene, "object": obj, "hdri": hdri, "res": list(res),
+            "samples": samples, "photo": p["path"], "engine": "CYCLES", "move": list(move),
+            "second": second, "save": blend}
+    out = dict(np.load(_run(args, key) + ".npz"))
+    again = _run({"kind": "reopen", "save": blend, "samples": samples, "engine": "CYCLES"},
+                 dict(key, kind="reopen"))
+    out["reopened"] = np.load(again + ".npz")["image"]
+    return out
 
 
 def lab(rgb):

@@ -6,9 +6,13 @@ mask),
 ``truth`` (the set with the object), ``catcher`` (the user's alternative: the object over the
 photo with Cycles' shadow catcher on the set), ``ours`` (the photo as the camera's background,
 roles, ``bpy.ops.relight.ar_setup()``, the scene's render; optionally saved, and rendered
-again after a move of the object).  Writes ``<out>.npz``: image (H, W, 3) linear float32 top
-row first, seconds (the render's wall time), cpu (its process CPU time), and what the kind
-adds.
+again after a move of the object), ``chain`` (``ours``, then the object moved to ``move``
+and rendered, a second object ``second`` added and ``relight.update()``, rendered, saved to
+``save``), ``reopen`` (the saved file opened and rendered: no add-on code runs before the
+render).  ``placements`` (truth, catcher): the objects' triangles given as spheres
+({"radius", "centre"}) instead of the scene's object.  Writes ``<out>.npz``: image (H, W, 3)
+linear float32 top row first, seconds (the render's wall time), cpu (its process CPU time),
+and what the kind adds.
 """
 import json
 import os
@@ -55,15 +59,23 @@ def _render(sc, path):
     return px.reshape(h, w, 4)[::-1, :, :3].copy(), wall, cpu
 
 
-def _mask(sc, args):
-    """(H, W) coverage of the object in the frame: its triangles projected by the camera
-    (bpy_extras.world_to_camera_view), rasterised 4x finer and averaged down."""
+def _sphere(spec, n_lat=24, n_lon=48):
+    return S.ar_scenes.uv_sphere(radius=spec["radius"], centre=spec["centre"], n_lat=n_lat,
+                                 n_lon=n_lon)
+
+
+def _mask(sc, args, tri=None):
+    """(H, W) coverage of the object (or the triangles ``tri``) in the frame: its triangles
+    projected by the camera (bpy_extras.world_to_camera_view), rasterised 4x finer and averaged
+    down."""
     import cv2
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
     w, h = args["res"]
     k = 4
-    tri = S.object_triangles(args["object"], args["scene"]).reshape(-1, 3)
+    if tri is None:
+        tri = S.object_triangles(args["object"], args["scene"])
+    tri = tri.reshape(-1, 3)
     uv = np.array([world_to_camera_view(sc, sc.camera, Vector(p))[:2] for p in tri])
     img = np.zeros((h * k, w * k), np.uint8)
     pts = np.stack([uv[:, 0] * w * k, (1 - uv[:, 1]) * h * k], 1).reshape(-1, 3, 2)
@@ -130,10 +142,22 @@ def main():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     kind = args["kind"]
     out = {}
-    S.build(args["scene"], args["object"], args["hdri"], with_object=kind in ("truth",
-                                                                            "catcher"),
-            res=tuple(args["res"]))
+    if kind == "reopen":
+        bpy.ops.wm.open_mainfile(filepath=args["save"])
+        sc = bpy.context.scene
+        _engine(sc, args.get("engine", "CYCLES"), args["samples"], args.get("denoise", True))
+        out["image"], out["seconds"], out["cpu"] = _render(sc, args["out"] + ".exr")
+        np.savez(args["out"] + ".npz", **out)
+        return
+    placed = args.get("placements")
+    S.build(args["scene"], args["object"], args["hdri"],
+            with_object=kind in ("truth", "catcher") and not placed, res=tuple(args["res"]))
     sc = bpy.context.scene
+    if placed and kind in ("truth", "catcher"):
+        tris = [_sphere(p) for p in placed]
+        for tri in tris:
+            S.add_object(args["object"], args["scene"], tri=tri)
+        out["mask"] = _mask(sc, args, np.concatenate(tris))
     _engine(sc, args.get("engine", "CYCLES"), args["samples"], args.get("denoise", True))
     tmp = args["out"] + ".exr"
     if kind == "photo":
@@ -146,7 +170,7 @@ def main():
         if kind == "catcher":
             _catcher(sc, args)
         out["image"], out["seconds"], out["cpu"] = _render(sc, tmp)
-    elif kind == "ours":
+    elif kind in ("ours", "chain"):
         from scenes.addon import register_repo_addon
         register_repo_addon()
         ob = _photo_setup(sc, args)
@@ -155,12 +179,24 @@ def main():
         out["setup_seconds"] = time.perf_counter() - t
         assert result == {"FINISHED"}, result
         out["image"], out["seconds"], out["cpu"] = _render(sc, tmp)
-        if args.get("save"):
+        if kind == "ours" and args.get("save"):
             bpy.ops.wm.save_as_mainfile(filepath=args["save"])
         if args.get("move"):
             ob.location = args["move"]
             bpy.context.view_layer.update()
             out["moved"], _, _ = _render(sc, tmp)
+        if kind == "chain":
+            second = S.add_object(args["object"], args["scene"],
+                                  tri=_sphere(args["second"], 8, 16))
+            second["relight_role"] = "virtual"
+            second["relight_spheres"] = 8
+            bpy.context.view_layer.update()
+            t = time.perf_counter()
+            result = bpy.ops.relight.update()
+            out["update_seconds"] = time.perf_counter() - t
+            assert result == {"FINISHED"}, result
+            out["second"], _, _ = _render(sc, tmp)
+            bpy.ops.wm.save_as_mainfile(filepath=args["save"])
     np.savez(args["out"] + ".npz", **out)
 
 

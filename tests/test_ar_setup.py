@@ -243,3 +243,26 @@ def test_clear_puts_everything_back(tmp_path):
         assert after[k] == before[k], k
     assert {n for n in after["images"]} == {n for n in before["images"]}
     assert not _mod("ar").is_set_up(sc)
+
+
+def test_undo_set_up(tmp_path):
+    """Undo after Set Up AR gives the scene back as it was (materials, slots, compositor,
+    passes, render settings, state); redo brings the composite back.  Headless Blender makes
+    no undo steps for script-called operators: they are pushed around the call, as the UI
+    does."""
+    sc, ob = build(tmp_path)
+    bpy.ops.ed.undo_push(message="built")
+    before = snapshot()
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="set up")
+    after = snapshot()
+    assert after != before
+    bpy.ops.ed.undo()
+    now = snapshot()
+    for k in before:
+        if k != "images":          # the photo, packed by Set Up, is the same datablock
+            assert now[k] == before[k], k
+    assert not _mod("ar").is_set_up(bpy.context.scene)
+    bpy.ops.ed.redo()
+    assert _mod("ar").is_set_up(bpy.context.scene)
+    assert snapshot()["slots"] == after["slots"]

@@ -31,7 +31,7 @@ import numpy as np
 
 from . import ar_nodes, ar_read, ar_write, ids
 from .images import MapWriter
-from .pipeline import Outcome, PipelineError
+from .pipeline import Outcome
 
 STATE = "relight_ar"
 _LIGHTING = {}           # env hash -> EnvironmentLighting prepared in this session

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 
-import bpy
 import numpy as np
 
 from ..core.ar.placement import crosses
