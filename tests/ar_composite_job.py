@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import ar_composite_scenes as S  # noqa: E402
 
 
-def _engine(sc, engine, samples, denoise):
+def _engine(sc, engine, samples, denoise, args=None):
     sc.render.engine = engine
     if engine == "CYCLES":
         sc.cycles.device = "CPU"
@@ -40,6 +40,8 @@ def _engine(sc, engine, samples, denoise):
         sc.cycles.seed = 0
     else:
         sc.eevee.taa_render_samples = samples
+        if args and "eevee_raytracing" in args:             # an experiment's switch (not the default)
+            sc.eevee.use_raytracing = bool(args["eevee_raytracing"])
 
 
 def _render(sc, path):
@@ -158,7 +160,7 @@ def main():
         for tri in tris:
             S.add_object(args["object"], args["scene"], tri=tri)
         out["mask"] = _mask(sc, args, np.concatenate(tris))
-    _engine(sc, args.get("engine", "CYCLES"), args["samples"], args.get("denoise", True))
+    _engine(sc, args.get("engine", "CYCLES"), args["samples"], args.get("denoise", True), args)
     tmp = args["out"] + ".exr"
     if kind == "photo":
         sc.render.image_settings.file_format = "PNG"

@@ -266,3 +266,47 @@ def test_undo_set_up(tmp_path):
     bpy.ops.ed.redo()
     assert _mod("ar").is_set_up(bpy.context.scene)
     assert snapshot()["slots"] == after["slots"]
+
+
+class _Layout:
+    """Records what a panel's draw() puts in the sidebar (background mode has no UI)."""
+
+    def __init__(self, log):
+        self.log, self.scale_y, self.enabled = log, 1.0, True
+
+    def label(self, text="", icon='NONE'):
+        self.log.append(("label", text))
+
+    def operator(self, idname, text=None, icon='NONE', **_):
+        module, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, module), name), idname
+        self.log.append(("operator", idname))
+
+    def column(self, **_):
+        return self
+
+    row = box = column
+
+
+def test_the_ar_panel_draws_before_and_after_set_up(tmp_path):
+    """The sidebar's AR sub-panel offers Set Up AR and Update, then says what Set Up read and
+    offers Clear AR; its lines fit the sidebar."""
+    from types import SimpleNamespace
+    sc, ob = build(tmp_path)
+    panels = importlib.import_module(f"{PACKAGE}.panels.ar")
+
+    def draw():
+        log = []
+        ctx = SimpleNamespace(scene=bpy.context.scene, active_object=ob, region=None,
+                              preferences=bpy.context.preferences)
+        for cls in panels.classes:
+            cls.draw(SimpleNamespace(layout=_Layout(log)), ctx)
+        return log
+    log = draw()
+    assert ("operator", "relight.ar_setup") in log and ("operator", "relight.update") in log
+    assert ("operator", "relight.ar_clear") not in log
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    log = draw()
+    assert ("operator", "relight.ar_clear") in log
+    assert any("Photo 'photo.png'" in t for kind, t in log if kind == "label"), log
+    assert all(len(t) <= 70 for kind, t in log if kind == "label"), log
