@@ -310,3 +310,20 @@ def test_the_ar_panel_draws_before_and_after_set_up(tmp_path):
     assert ("operator", "relight.ar_clear") in log
     assert any("Photo 'photo.png'" in t for kind, t in log if kind == "label"), log
     assert all(len(t) <= 70 for kind, t in log if kind == "label"), log
+
+
+def test_every_driver_is_a_simple_expression(tmp_path):
+    """The composite renders with Python auto-run off and without the add-on: every driver
+    Set Up made is one Blender evaluates without Python (its own is_simple_expression flag)."""
+    sc, ob = build(tmp_path)
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ids = _mod("ids")
+    key = ids.scene_key(sc)
+    owners = [g for g in bpy.data.node_groups if ids.ours(g, key)]
+    owners += [m.node_tree for m in bpy.data.materials if ids.ours(m, key) and m.node_tree]
+    drivers = [fc for o in owners if o.animation_data for fc in o.animation_data.drivers]
+    assert len(drivers) >= 3 * 8                     # at least the spheres' centres
+    for fc in drivers:
+        assert fc.driver.type == "SCRIPTED" and fc.driver.is_simple_expression, \
+            fc.driver.expression
+        assert fc.driver.is_valid, fc.driver.expression
