@@ -26,7 +26,7 @@ from .pipeline import PipelineError
 from .roles import object_role, raw_property
 from .sphere_nodes import object_triangles
 
-AR_SPHERES = 16          # spheres per object unless its relight_spheres is set (ar_composite.md)
+AR_SPHERES = 16          # per object unless relight_spheres is set: each adds node groups per light
 MAX_ENV_WIDTH = 1024     # wider maps are averaged down first (the bundled HDRIs' width)
 GEOMETRY = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 ASPECT_TOLERANCE = 0.01  # photo vs render aspect: relative difference above which we warn
