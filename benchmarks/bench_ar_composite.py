@@ -84,6 +84,19 @@ def main():
             f"{r['catcher']['cpu']:.1f} ({r['catcher']['wall']:.1f}) | {f(cy)} | "
             f"{cy['cpu']:.1f} ({cy['wall']:.1f}) | {cy['setup']:.1f} | "
             + (f"{f(ev)} | {ev['cpu']:.1f} ({ev['wall']:.1f}) |" if ev else "- | - |"))
+    lines += ["", "Notes:", "",
+              "- pasted: the truth's pixels on the object over the photo, no shadow (what the "
+              "shadow is worth); catcher: Cycles' shadow catcher composite (the receivers as "
+              "shadow catchers, the HDRI as World) at the truth's samples.",
+              "- Shadow: the truth darker than the photo by 10 % outside the object; object: "
+              "its coverage > 1/2. A region of few pixels (the table's) is dominated by its "
+              "penumbra's edge pixels at this size.",
+              "- EEVEE lights the object by the World alone (its world probe): below the "
+              "object it sees the HDRI's own ground where Cycles (truth and ours) sees the "
+              "set's grey ground; in a real capture the HDRI's ground is the photographed one.",
+              "- Times: the render's process CPU seconds (all its threads), the wall seconds "
+              "beside them carry the shared machine's load of that moment; Set Up once per "
+              "scene (environment, receiver view, sphere fits)."]
     (RESULTS / "ar_composite.md").write_text("\n".join(lines) + "\n")
 
 

@@ -155,7 +155,7 @@ def test_moving_the_object_moves_its_spheres(tmp_path):
 
 
 BAD = ("no camera", "orthographic camera", "no background", "no world texture",
-       "no receiver", "receiver not seen", "object without faces", "object through receiver",
+       "no receiver", "receiver not seen", "no virtual object", "object without faces", "object through receiver",
        "1x1 environment", "NaN environment")
 
 
@@ -172,6 +172,8 @@ def _break(case, sc, ob):
     elif case == "no receiver":
         for o in S.set_objects():
             o["relight_role"] = "relit"
+    elif case == "no virtual object":
+        del ob["relight_role"]
     elif case == "receiver not seen":
         bpy.data.objects["Ground"].location = (0, -60, 0)     # behind the camera
     elif case == "object without faces":
@@ -327,3 +329,18 @@ def test_every_driver_is_a_simple_expression(tmp_path):
         assert fc.driver.type == "SCRIPTED" and fc.driver.is_simple_expression, \
             fc.driver.expression
         assert fc.driver.is_valid, fc.driver.expression
+
+
+def test_update_after_the_last_object_is_removed(tmp_path):
+    """Set Up refuses a scene without virtual objects (test_bad_input_...), but an Update after
+    the last one was deleted keeps the composite (the receivers show the photo) and warns."""
+    sc, ob = build(tmp_path)
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ar, ar_nodes, ids = _mod("ar"), _mod("ar_nodes"), _mod("ids")
+    bpy.data.objects.remove(ob)
+    bpy.context.view_layer.update()
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert ar_nodes.shadow_groups(ids.scene_key(sc)) == {}
+    st = ar.state(sc)
+    assert st["objects"] == [] and any("virtual" in w for w in st["warnings"])
+    assert bpy.data.objects["Ground"].material_slots[0].material.get("relight_ar_material")

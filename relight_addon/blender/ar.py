@@ -126,7 +126,7 @@ def _group_fit(ng):
 
 def prepare(context, how="setup") -> ARJob:
     """Read ``context.scene`` for AR mode (ar_read.read); PipelineError on bad input."""
-    inp = ar_read.read(context)
+    inp = ar_read.read(context, require_objects=how == "setup")
     scene = context.scene
     st = state(scene) if is_set_up(scene) else {}
     key = ids.scene_key(scene)

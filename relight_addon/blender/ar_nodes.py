@@ -544,14 +544,13 @@ def composite_group(key, photo, image, bands, rows, lights, floor, shadows, view
         groups = [group_node(b, g, Position=p, Normal=n, Residual=e_res, Cone=cone_px,
                              Cone_Cos=cone_cos) for g in shadows]
         b.column()
-        # the residual: E_res (O - 1 + prod (1 - w (1 - V)))
+        # the residual: E_res O prod (1 - w (1 - V)) (composite.py)
         kept = None
         for g in groups:
             k = b.vmath("SUBTRACT", one, b.vmath("SCALE", b.vmath(
                 "SUBTRACT", one, g.outputs["Residual"]), scale=g.outputs["Seen"]))
             kept = k if kept is None else b.vmath("MULTIPLY", kept, k)
-        lit = b.vmath("MULTIPLY", e_res, b.vmath("MAXIMUM", b.vmath(
-            "ADD", b.vmath("SUBTRACT", open_px, one), kept), (0.0,) * 3))
+        lit = b.vmath("MULTIPLY", e_res, b.vmath("MULTIPLY", open_px, kept))
         received = b.vmath("MULTIPLY", e_res, open_px)
         for j, e in enumerate(e_lights):
             s_j = _channel(b, sun_px, j) if sun_px is not None else 1.0

@@ -202,9 +202,10 @@ def role_objects(scene, role):
                    and object_role(o) == role), key=lambda o: o.name)
 
 
-def read(context) -> ARInput:
+def read(context, require_objects=True) -> ARInput:
     """The AR scene of ``context.scene`` (see the module docstring); PipelineError on bad
-    input (one sentence; nothing is changed)."""
+    input (one sentence; nothing is changed).  ``require_objects``: no virtual object is bad
+    input (Set Up), else a warning (an Update after the last one was removed)."""
     scene = context.scene
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
@@ -285,6 +286,9 @@ def read(context) -> ARInput:
         warnings.append(f"The photo is {photo.size[0]} x {photo.size[1]} but the render "
                         f"{r.resolution_x} x {r.resolution_y}: the photo is stretched to the "
                         "camera's frame (set the render resolution to the photo's)")
+    if not objects and require_objects:
+        raise PipelineError("No object has the role 'virtual': mark the objects inserted into "
+                            "the photo as virtual (Relight > Virtual > Role)")
     if not objects:
         warnings.append("No object has the role 'virtual' yet: the receivers show the photo "
                         "(mark the inserted objects as virtual, then Update)")

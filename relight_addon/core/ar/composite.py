@@ -16,12 +16,15 @@ sphere: relight.spheres) under the environment (lighting.EnvironmentLighting), w
 set hides from itself at that point (receiver_view.py: the lights' parts S_j, the residual's
 part O, the visibility cone):
 
-    F = (E_res (O - 1 + prod_o (1 - w_o (1 - V_res,o))) + sum_j E_j S_j prod_o V_j,o)
+    F = (E_res O prod_o (1 - w_o (1 - V_res,o)) + sum_j E_j S_j prod_o V_j,o)
         / (E_res O + sum_j E_j S_j)
 
 E_res the residual's irradiance, E_j the lights', V_res,o / V_j,o their parts seen past object
 o (env_shadow.residual_visibility / light_visibility), w_o whether o is inside the point's
-visibility cone (:func:`seen`).  Without a set that hides anything (S = O = w = 1) and for one
+visibility cone (:func:`seen`).  The residual's part seen past the set and past the
+objects is the product O x prod: what the set hides and what an object hides are taken as
+independent (O - 1 + prod, disjoint, removed twice where an object hides directions the set
+already hides: a dark ring on the walls behind an object standing in a corner).  Without a set that hides anything (S = O = w = 1) and for one
 object, F is env_shadow.env_shadow_factor (within DARK_FLOOR).  A point the set leaves in the
 dark keeps its photo (both sums get DARK_FLOOR x E).
 """
@@ -87,7 +90,7 @@ def receiver_factor(points, normals, casters, lighting, sun=None, openness=None,
         w = np.ones(n) if cone is None else seen(p, c.hull, cone)
         v = residual_visibility(p, nrm, c.centres, c.radii, lighting, c.hull, e_amb)
         kept *= 1.0 - w[:, None] * (1.0 - v)
-    lit = e_amb * np.maximum(o - 1.0 + kept, 0.0)
+    lit = e_amb * o * kept
     received = e_amb * o
     total = e_amb.copy()
     lights = [lt for lt in lighting.lights if lt.solid_angle > 0]
