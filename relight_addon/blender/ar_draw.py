@@ -23,7 +23,7 @@ import numpy as np
 from . import ar_nodes, ids
 
 _state = {"handle": None, "shader": None, "batch": None, "batch_key": None,
-          "textures": None, "tables_key": None}
+          "textures": None, "tables_key": None, "failed": None}
 
 
 def _ar_state(scene):
@@ -161,11 +161,24 @@ def _set_uniforms(shader, u):
 
 
 def _draw():
-    """The SpaceView3D POST_VIEW callback."""
+    """The SpaceView3D POST_VIEW callback: a failure is printed once and turns the drawing off
+    (a traceback at every redraw would flood the console), until the handler is installed
+    again."""
+    if _state["failed"] is not None:
+        return
+    try:
+        _draw_frame()
+    except Exception as ex:  # noqa: BLE001 - any gpu or data error: stop drawing, say why
+        _state["failed"] = f"{type(ex).__name__}: {ex}"
+        print(f"Relight: the AR viewport shadows are off ({_state['failed']})")
+
+
+def _draw_frame(context=None):
+    """One frame of the handler in ``context`` (bpy.context: the region being drawn)."""
     import bpy
     import gpu
     from gpu_extras.batch import batch_for_shader
-    context = bpy.context
+    context = bpy.context if context is None else context
     scene = context.scene
     region_data = context.region_data
     st = _ar_state(scene) if scene is not None else None
@@ -180,6 +193,8 @@ def _draw():
     key = receiver_key(scene, st)
     if _state["batch"] is None or _state["batch_key"] != key:
         pos, nor = receiver_arrays(scene, st, context.evaluated_depsgraph_get())
+        if len(pos) == 0:
+            return
         _state["batch"] = batch_for_shader(shader, "TRIS", {"pos": pos.tolist(),
                                                             "nor": nor.tolist()})
         _state["batch_key"] = key
@@ -229,6 +244,6 @@ def unregister_draw():
     import bpy
     handle = _state["handle"]
     _state.update(handle=None, shader=None, batch=None, batch_key=None, textures=None,
-                  tables_key=None)
+                  tables_key=None, failed=None)
     if handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")
