@@ -155,8 +155,8 @@ def test_moving_the_object_moves_its_spheres(tmp_path):
 
 
 BAD = ("no camera", "orthographic camera", "no background", "no world texture",
-       "no receiver", "receiver not seen", "no virtual object", "object without faces", "object through receiver",
-       "1x1 environment", "NaN environment")
+       "no receiver", "receiver not seen", "no virtual object", "object without faces",
+       "object through receiver", "1x1 environment", "NaN environment")
 
 
 def _break(case, sc, ob):

@@ -24,9 +24,10 @@ o (env_shadow.residual_visibility / light_visibility), w_o whether o is inside t
 visibility cone (:func:`seen`).  The residual's part seen past the set and past the
 objects is the product O x prod: what the set hides and what an object hides are taken as
 independent (O - 1 + prod, disjoint, removed twice where an object hides directions the set
-already hides: a dark ring on the walls behind an object standing in a corner).  Without a set that hides anything (S = O = w = 1) and for one
-object, F is env_shadow.env_shadow_factor (within DARK_FLOOR).  A point the set leaves in the
-dark keeps its photo (both sums get DARK_FLOOR x E).
+already hides: a dark ring on the walls behind an object standing in a corner).  Without a
+set that hides anything (S = O = w = 1) and for one object, F is env_shadow.env_shadow_factor
+(within DARK_FLOOR).  A point the set leaves in the dark keeps its photo (both sums get
+DARK_FLOOR x E).
 """
 from __future__ import annotations
 
