@@ -3,9 +3,9 @@
 
 import bpy
 
-from . import capture, dependencies, eevee, lamps, precompute, settings, settle, unwrap
+from . import ar, capture, dependencies, eevee, lamps, precompute, settings, settle, unwrap
 
-_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle, capture)
+_modules = (settings, dependencies, precompute, unwrap, lamps, eevee, settle, ar, capture)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 
@@ -19,15 +19,22 @@ def _one_line_tooltips():
             cls.bl_description = " ".join(cls.__doc__.split())
 
 
+def _ar_draw():
+    from ..relight_addon.blender import ar_draw
+    return ar_draw
+
+
 def register():
     _one_line_tooltips()
     _register()
     settings.attach()
     settle.attach()
     capture.attach()
+    _ar_draw().register_draw()          # AR mode's live viewport (nothing in background mode)
 
 
 def unregister():
+    _ar_draw().unregister_draw()
     capture.detach()
     settle.detach()
     settings.detach()

@@ -3,10 +3,10 @@
 
 import bpy
 
-from . import capture, main
+from . import ar, capture, main
 
-# the main panel first: the Capture sub-panel names it as its parent
-_modules = (main, capture)
+# the main panel first: the AR and Capture sub-panels name it as their parent
+_modules = (main, ar, capture)
 
 classes = tuple(cls for module in _modules for cls in module.classes)
 

@@ -93,10 +93,11 @@ class Builder:
         return self.math("DIVIDE", sq, self.math("ADD", 1.0, root))
 
 
-def new_group(name, inputs, outputs, key):
-    """A shader node group tagged for the scene with ``key``: (group, its input node, its output
-    node); ``inputs`` / ``outputs``: (socket name, socket type) pairs."""
-    ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
+def new_group(name, inputs, outputs, key, tree_type="ShaderNodeTree"):
+    """A node group (shader, or ``tree_type``: "CompositorNodeTree") tagged for the scene with
+    ``key``: (group, its input node, its output node); ``inputs`` / ``outputs``: (socket name,
+    socket type) pairs."""
+    ng = bpy.data.node_groups.new(name, tree_type)
     for sock_name, kind in inputs:
         ng.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind)
     for sock_name, kind in outputs:

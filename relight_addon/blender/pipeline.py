@@ -221,6 +221,10 @@ def prepare(context, kind="update", preset=None, correction=None) -> Job:
     from ..core.fingerprint import scene_parts
     from ..core.scene import SceneError
     scene = context.scene
+    if kind == "update":                  # a scene set up for AR: Update refreshes AR (ar.py)
+        from . import ar
+        if ar.is_set_up(scene):
+            return ar.prepare(context, "update")
     settings = getattr(scene, "relight", None)
     preset = preset or (settings.preset if settings is not None else "medium")
     correction = correction or (settings.correction if settings is not None else "TEXEL")
@@ -398,6 +402,8 @@ def finish(context, job, result) -> Outcome:
     """Write what ``job`` computed (``result``, or None for the actions that compute nothing)
     into ``context.scene``; returns what was done."""
     from ..core.relight.diagnose import diagnose
+    if getattr(job, "kind", None) == "ar":    # AR mode's job writes itself (ar.py)
+        return job.write(context, result)
     scene = context.scene
     report = job.report
     if job.action in ("none", "reapply"):
@@ -520,6 +526,8 @@ def show_relit(scene) -> int:
 
 def clear(scene) -> dict:
     """Restore, then delete what Relight made for this scene and its state."""
+    from . import ar
+    ar.clear(scene)                       # AR mode's compositor, passes and settings first
     key = ids.scene_key(scene)
     summary = write.clear_relight_data(scene)
     if key is not None:

@@ -182,17 +182,19 @@ CAP_GROUP = "Relight Sphere Cap"
 CAP_VERSION = 1
 
 
-def cap_group(key):
+def cap_group(key, tree_type="ShaderNodeTree"):
     """The shared node group of one sphere (sphere_shadow.cap_visibility's blocked part b, in
-    the object's frame): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b)."""
+    the object's frame): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b).
+    ``tree_type``: a shader group, or the compositor's (AR mode)."""
     for ng in bpy.data.node_groups:
-        if ng.get(CAP_KEY) == CAP_VERSION and ng.get(ids.SCENE_KEY) == key:
+        if ng.get(CAP_KEY) == CAP_VERSION and ng.get(ids.SCENE_KEY) == key and \
+                ng.bl_idname == tree_type:
             return ng
     vec, flt = "NodeSocketVector", "NodeSocketFloat"
     ng, gin, gout = new_group(CAP_GROUP, [
         ("Position", vec), ("To Lamp", vec), ("Lamp Distance", flt), ("Lamp Angle", flt),
         ("Lamp Cap", flt), ("Centre", vec), ("Radius", flt), ("Product", flt), ("Max", flt),
-        ("Part", flt)], [("Product", flt), ("Max", flt)], key)
+        ("Part", flt)], [("Product", flt), ("Max", flt)], key, tree_type)
     ng[CAP_KEY] = CAP_VERSION
     ng.use_fake_user = True
     b = Builder(ng)

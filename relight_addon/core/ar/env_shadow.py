@@ -122,6 +122,63 @@ def _cap_term(cap):
     return cap_cosine_integral if cap == "exact" else seed_cap_cosine_integral
 
 
+def residual_irradiance(normals, lighting):
+    """The residual's irradiance (n, 3) at unit ``normals``: the map's exact one (irradiance
+    table) less the lights', floored at E_FLOOR x the map's mean irradiance."""
+    nrm = np.asarray(normals, float)
+    e_amb = sample_nodes(lighting.irradiance, nrm)
+    for light in lighting.lights:
+        e_amb = e_amb - light_irradiance(light, nrm)
+    return np.maximum(e_amb, residual_floor(lighting))
+
+
+def residual_floor(lighting):
+    """The residual irradiance's floor: E_FLOOR x the map's mean irradiance."""
+    # the map's mean irradiance: pi x its mean radiance (the SH band-0 coefficient x Y00)
+    return E_FLOOR * max(float(np.abs(lighting.sh[0]).max()) * np.pi / np.sqrt(4 * np.pi), 1e-300)
+
+
+def _unit(normals):
+    nrm = np.asarray(normals, float)
+    return nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-300)
+
+
+def residual_visibility(points, normals, centres, radii, lighting, hull=None, e_amb=None,
+                        weighting="light+caps", cap="exact"):
+    """Visible part (n, 3) of the residual's irradiance past the spheres (``weighting``
+    "light+caps" or "light+sh", see the module docstring), combined within the ``hull``'s
+    silhouette; ``e_amb``: :func:`residual_irradiance` when the caller has it."""
+    p = np.asarray(points, float)
+    nrm = _unit(normals)
+    centres, radii = np.asarray(centres, float).reshape(-1, 3), np.asarray(radii, float).ravel()
+    C = _cap_term(cap)
+    e_amb = residual_irradiance(nrm, lighting) if e_amb is None else e_amb
+
+    def blocked(c, r):
+        axis, cb, s2 = cap_geometry(p, nrm, c, r)
+        if weighting == "light+caps":
+            ax2, alpha2 = visible_cap(axis, cb, s2, nrm)
+            rad = sample_cap_filtered(lighting.caps,
+                                      cosine_centroid(ax2, np.einsum("ij,ij->i", ax2, nrm),
+                                                      np.sin(alpha2) ** 2, nrm), alpha2)
+        else:
+            rad = sh9_cap_radiance(lighting.sh_ambient, axis, s2)
+        b = rad * C(cb, s2)[:, None] / e_amb
+        return np.where(s2[:, None] >= 1.0, 1.0, b)       # inside the sphere: all hidden
+
+    part = None if hull is None else np.minimum(blocked(hull[0], hull[1]), 1.0)
+    return combined_visibility((np.minimum(blocked(c, r), 1.0) for c, r in zip(centres, radii)),
+                               (len(p), 3), part)
+
+
+def light_visibility(points, light, centres, radii, hull=None):
+    """Visible part (n,) of ``light`` (a MainLight, a cone) past the spheres: the lamps' own
+    formula (relight.sphere_shadow.sphere_visibility) for a disk SUN_DISTANCE away."""
+    pos, rad = sun_disk(-light.direction, 2.0 * light.half_angle)
+    return sphere_visibility(np.asarray(points, float), pos, rad, np.asarray(centres, float),
+                             np.asarray(radii, float), hull)
+
+
 def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
                       weighting="light+caps", cap="exact"):
     """Shadow factor (n, 3) in [0, 1] of receivers ``points`` (n, 3) with unit ``normals``
@@ -132,61 +189,40 @@ def env_shadow_factor(points, normals, centres, radii, lighting, hull=None,
     "seed".  1 where nothing is
     hidden; never NaN."""
     p = np.asarray(points, float)
-    nrm = np.asarray(normals, float)
-    nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-300)
+    nrm = _unit(normals)
     n = len(p)
     centres, radii = np.asarray(centres, float).reshape(-1, 3), np.asarray(radii, float).ravel()
     C = _cap_term(cap)
-    # the map's mean irradiance: pi x its mean radiance (the SH band-0 coefficient x Y00)
-    floor = E_FLOOR * max(float(np.abs(lighting.sh[0]).max()) * np.pi / np.sqrt(4 * np.pi), 1e-300)
 
     if weighting in ("light+caps", "light+sh"):
-        # the residual's irradiance: the exact one (irradiance map) less the lights' own
-        e_amb = sample_nodes(lighting.irradiance, nrm)
+        e_amb = residual_irradiance(nrm, lighting)
+        visible = residual_visibility(p, nrm, centres, radii, lighting, hull, e_amb, weighting,
+                                      cap)
+        lit = e_amb * visible
+        total = e_amb.copy()
         for light in lighting.lights:
-            e_amb = e_amb - light_irradiance(light, nrm)
-        e_amb = np.maximum(e_amb, floor)
-
-        def blocked(c, r):
-            axis, cb, s2 = cap_geometry(p, nrm, c, r)
-            if weighting == "light+caps":
-                ax2, alpha2 = visible_cap(axis, cb, s2, nrm)
-                rad = sample_cap_filtered(lighting.caps,
-                                          cosine_centroid(ax2, np.einsum("ij,ij->i", ax2, nrm),
-                                                          np.sin(alpha2) ** 2, nrm), alpha2)
-            else:
-                rad = sh9_cap_radiance(lighting.sh_ambient, axis, s2)
-            b = rad * C(cb, s2)[:, None] / e_amb
-            return np.where(s2[:, None] >= 1.0, 1.0, b)       # inside the sphere: all hidden
-    elif weighting == "mips":
-        e_all = np.maximum(sample_nodes(lighting.irradiance, nrm), floor)
-        size = lighting.mips[0].shape[1]
-
-        def blocked(c, r):
-            axis, cb, s2 = cap_geometry(p, nrm, c, r)
-            rad = sample_cube_mips(lighting.mips, axis, mip_level_for_cap(s2, size),
-                                   lighting.padded)
-            return np.where(s2[:, None] >= 1.0, 1.0, rad * C(cb, s2)[:, None] / e_all)
-    else:
+            if light.solid_angle <= 0:
+                continue
+            e_light = light_irradiance(light, nrm)
+            lit = lit + e_light * light_visibility(p, light, centres, radii, hull)[:, None]
+            total = total + e_light
+        return np.clip(lit / total, 0.0, 1.0)
+    if weighting != "mips":
         raise ValueError(f"Unknown weighting {weighting!r}: expected 'light+caps', 'light+sh' "
                          f"or 'mips'.")
+    e_all = np.maximum(sample_nodes(lighting.irradiance, nrm), residual_floor(lighting))
+    size = lighting.mips[0].shape[1]
+
+    def blocked(c, r):
+        axis, cb, s2 = cap_geometry(p, nrm, c, r)
+        rad = sample_cube_mips(lighting.mips, axis, mip_level_for_cap(s2, size),
+                               lighting.padded)
+        return np.where(s2[:, None] >= 1.0, 1.0, rad * C(cb, s2)[:, None] / e_all)
 
     part = None if hull is None else np.minimum(blocked(hull[0], hull[1]), 1.0)
     visible = combined_visibility((np.minimum(blocked(c, r), 1.0) for c, r in zip(centres, radii)),
                                   (n, 3), part)
-    if weighting == "mips":
-        return np.clip(visible, 0.0, 1.0)
-
-    lit = e_amb * visible
-    total = e_amb.copy()
-    for light in lighting.lights:
-        if light.solid_angle <= 0:
-            continue
-        e_light = light_irradiance(light, nrm)
-        pos, rad = sun_disk(-light.direction, 2.0 * light.half_angle)
-        lit = lit + e_light * sphere_visibility(p, pos, rad, centres, radii, hull)[:, None]
-        total = total + e_light
-    return np.clip(lit / total, 0.0, 1.0)
+    return np.clip(visible, 0.0, 1.0)
 
 
 def luminance_factor(points, normals, factor, lighting):

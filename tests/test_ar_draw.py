@@ -1,0 +1,269 @@
+"""AR mode's live viewport (blender/ar_draw.py): what its draw handler feeds the sphere-shadow
+shader, from a scene after ``bpy.ops.relight.ar_setup()``, run on a headless OpenGL context.
+
+* In background mode the handler is not installed (no gpu module there).
+* frame_data(): the virtual object's spheres in world space follow the object (a move, a
+  rotation, a scale) with no Update: against the fitted spheres stored at Set Up moved by
+  mathutils' matrix_world, computed here.
+* The shader (moderngl, EGL, llvmpipe) drawing the receivers' triangles (receiver_arrays)
+  with those uniforms and the textures read back from the stored tables image
+  (table_textures) gives, pixel by pixel, the numpy twin env_shadow_factor of the lighting
+  prepared from the World's map, before and after a move of the object.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import test_ar_setup as A  # noqa: E402
+
+pytestmark = pytest.mark.skipif("sunrise" not in A.HDRIS, reason="bundled HDRIs not found")
+
+
+def test_no_draw_handler_in_background_mode():
+    ar_draw = A._mod("ar_draw")
+    assert bpy.app.background
+    assert ar_draw.register_draw() is False and not ar_draw.is_registered()
+
+
+def _expected_spheres(ob, group):
+    from mathutils import Vector
+    a = np.asarray(group["relight_ar_spheres"], float).reshape(-1, 4)
+    m = ob.matrix_world
+    centres = np.array([list(m @ Vector(c)) for c in a[:, :3]])
+    return centres, a[:, 3] * float(np.mean(m.to_scale()))
+
+
+def _draw(uniforms, textures, pos, nor, half, size=64):
+    """The shader drawing the triangles top-down over [-half, half]^2 (z up); float32 RGBA."""
+    import moderngl
+    from relight_addon.blender import ar_shader
+    ctx = moderngl.create_standalone_context(backend="egl")
+    prog = ctx.program(vertex_shader=ar_shader.standalone_glsl("vert"),
+                       fragment_shader=ar_shader.standalone_glsl("frag"))
+    vbo = ctx.buffer(np.concatenate([pos, nor], 1).astype("f4").tobytes())
+    vao = ctx.vertex_array(prog, [(vbo, "3f 3f", "pos", "nor")])
+    mvp = np.diag([1 / half, 1 / half, -1e-3, 1.0]).astype("f4")
+    prog["ModelViewProjectionMatrix"].write(mvp.T.tobytes())
+    for k, v in uniforms.items():
+        if k in prog:
+            if np.ndim(v):
+                prog[k].write(np.ascontiguousarray(v, np.float32).tobytes())
+            else:
+                prog[k].value = v.item() if hasattr(v, "item") else v
+    im, ct = textures["irradiance_map"], textures["cap_tables"]
+    t0 = ctx.texture((im.shape[1], im.shape[0]), 3, np.ascontiguousarray(im, "f4").tobytes(),
+                     dtype="f4")
+    t1 = ctx.texture_array((ct.shape[2], ct.shape[1], ct.shape[0]), 3,
+                           np.ascontiguousarray(ct, "f4").tobytes(), dtype="f4")
+    for t in (t0, t1):
+        t.repeat_x, t.repeat_y = True, False
+        t.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    prog["irradiance_map"].value, prog["cap_tables"].value = 0, 1
+    t0.use(0)
+    t1.use(1)
+    fbo = ctx.simple_framebuffer((size, size), components=4, dtype="f4")
+    fbo.use()
+    fbo.clear()
+    vao.render()
+    ctx.finish()
+    img = np.frombuffer(fbo.read(components=4, dtype="f4"), "f4").reshape(size, size, 4)
+    ctx.release()
+    x = -half + (np.arange(size) + 0.5) / size * 2 * half
+    X, Y = np.meshgrid(x, x)
+    return img, np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], 1)
+
+
+def test_the_handler_draws_the_twin_and_follows_a_move(tmp_path):
+    pytest.importorskip("moderngl")
+    sc, ob = A.build(tmp_path)
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ar, ar_draw, ar_nodes, ids = (A._mod(n) for n in ("ar", "ar_draw", "ar_nodes", "ids"))
+    from relight_addon.core.ar.env_shadow import env_shadow_factor
+    from relight_addon.core.ar.shader_data import shadow_textures
+    st = ar.state(sc)
+    lighting = ar._LIGHTING[st["env_hash"]]
+    group = ar_nodes.shadow_groups(ids.scene_key(sc))[ob.name]
+    # the stored tables image gives back the textures of the lighting (a half-float image:
+    # relative steps of 2^-11)
+    tex = ar_draw.table_textures(st)
+    want = shadow_textures(lighting)
+    for k in want:
+        assert tex[k].shape == want[k].shape
+        assert np.allclose(tex[k], want[k], rtol=1e-3, atol=1e-6), k
+    pos, nor = ar_draw.receiver_arrays(sc, st, bpy.context.evaluated_depsgraph_get())
+    assert len(pos) == 6 and np.allclose(nor, [0, 0, 1])
+    try:
+        import moderngl
+        moderngl.create_standalone_context(backend="egl").release()
+    except Exception as exc:                          # no EGL / no llvmpipe here
+        pytest.skip(f"no headless OpenGL context: {exc}")
+    for loc, rot, scale in (((0.0, 0.0, 0.0), (0, 0, 0), 1.0),
+                            ((0.4, -0.3, 0.05), (0.2, -0.1, 0.7), 0.8)):
+        ob.location, ob.rotation_euler, ob.scale = loc, rot, (scale,) * 3
+        bpy.context.view_layer.update()
+        (name, u), = ar_draw.frame_data(sc)
+        centres, radii = _expected_spheres(ob, group)
+        n = u["n_spheres"]
+        assert name == ob.name and n == len(centres)
+        assert np.abs(u["spheres"][:n, :3] - centres).max() < 1e-5
+        assert np.abs(u["spheres"][:n, 3] - radii).max() < 1e-6
+        img, P = _draw(u, tex, pos, nor, half=1.5)
+        hull = (u["hull"][:3].astype(float), float(u["hull"][3]))
+        twin = env_shadow_factor(P, np.tile([0.0, 0.0, 1.0], (len(P), 1)), centres, radii,
+                                 lighting, hull).reshape(img.shape[0], img.shape[1], 3)
+        assert twin.min() < 0.7                                   # a shadow in the frame
+        d = np.abs(img[..., :3] - twin)
+        assert d.max() < 1e-2 and d.mean() < 2e-4, (d.max(), d.mean())
+
+
+class _FakeGpu:
+    """Stands in for Blender's gpu module (unavailable in background mode) with the signatures
+    of its documentation, checking what the handler declares and sends: uniform names and
+    sizes against the create-info, buffer lengths, texture sizes, batch attributes."""
+
+    def __init__(self):
+        import types
+        self.log = []
+        self.created = 0
+        fake = self
+
+        class Info:
+            def __init__(self):
+                self.inputs, self.constants, self.samplers = {}, {}, {}
+
+            def vertex_in(self, slot, typ, name):
+                self.inputs[name] = typ
+
+            def push_constant(self, typ, name, size=0):
+                self.constants[name] = (typ, size)
+
+            def sampler(self, slot, typ, name):
+                self.samplers[name] = typ
+
+            def vertex_out(self, iface):
+                pass
+
+            def fragment_out(self, slot, typ, name):
+                pass
+
+            def vertex_source(self, src):
+                assert "void main" in src
+
+            fragment_source = vertex_source
+
+        class Iface:
+            def __init__(self, name):
+                pass
+
+            def smooth(self, typ, name):
+                pass
+
+        class Shader:
+            def __init__(self, info):
+                self.info = info
+                self.names = list(info.constants)
+                self.values = {}
+
+            def bind(self):
+                fake.log.append("bind")
+
+            def uniform_float(self, name, value):
+                typ, size = self.info.constants[name]
+                want = {"FLOAT": 1, "VEC4": 4, "MAT4": 16}[typ]
+                n = len(np.ravel(np.asarray(value, float)))
+                assert size == 0 and n == want, (name, n, want)
+                self.values[name] = np.ravel(np.asarray(value, float))
+
+            def uniform_int(self, name, value):
+                assert self.info.constants[name] == ("INT", 0) and isinstance(value, int)
+                self.values[name] = value
+
+            def uniform_sampler(self, name, tex):
+                assert name in self.info.samplers
+                assert (self.info.samplers[name] == "FLOAT_2D_ARRAY") == (tex.layers > 0)
+                self.values[name] = tex
+
+            def uniform_from_name(self, name):
+                return self.names.index(name)
+
+            def uniform_vector_float(self, location, buffer, length, count):
+                name = self.names[location]
+                typ, size = self.info.constants[name]
+                assert {"FLOAT": 1, "VEC4": 4}[typ] == length and size == count, name
+                assert len(buffer.data) == length * count
+                self.values[name] = np.asarray(buffer.data).reshape(count, length)
+
+        class Buffer:
+            def __init__(self, fmt, size, data):
+                assert fmt == "FLOAT" and len(data) == size
+                self.data = list(data)
+
+        class Texture:
+            def __init__(self, size, layers=0, is_cubemap=False, format="RGBA8", data=None):
+                w, h = size
+                assert format == "RGBA32F" and len(data.data) == w * h * max(layers, 1) * 4
+                self.size, self.layers = size, layers
+
+        def create_from_info(info):
+            fake.created += 1
+            return Shader(info)
+
+        def batch_for_shader(shader, kind, content):
+            assert kind == "TRIS" and set(content) == set(shader.info.inputs)
+            n = {len(v) for v in content.values()}
+            assert len(n) == 1 and n.pop() % 3 == 0
+            fake.log.append("batch")
+            return types.SimpleNamespace(draw=lambda sh: fake.log.append(
+                ("draw", np.array(sh.values["spheres"]))))
+
+        state = types.SimpleNamespace(
+            blend_set=lambda m: self.log.append(("blend", m)),
+            depth_test_set=lambda m: self.log.append(("depth", m)),
+            depth_mask_set=lambda m: self.log.append(("mask", m)))
+        self.gpu = types.SimpleNamespace(
+            types=types.SimpleNamespace(GPUShaderCreateInfo=Info, GPUStageInterfaceInfo=Iface,
+                                        Buffer=Buffer, GPUTexture=Texture),
+            shader=types.SimpleNamespace(create_from_info=create_from_info), state=state)
+        self.batch = types.SimpleNamespace(batch_for_shader=batch_for_shader)
+
+
+def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
+    """The draw callback's frame, run against a stand-in of the gpu module: one shader built
+    once, the receivers' batch once, one multiplicative draw per object whose spheres are the
+    object's where it now is, the blend and depth state put back."""
+    from types import SimpleNamespace
+
+    from mathutils import Matrix
+    sc, ob = A.build(tmp_path)
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ar_draw, ar_nodes, ids = (A._mod(n) for n in ("ar_draw", "ar_nodes", "ids"))
+    fake = _FakeGpu()
+    monkeypatch.setitem(sys.modules, "gpu", fake.gpu)
+    monkeypatch.setitem(sys.modules, "gpu_extras.batch", fake.batch)
+    monkeypatch.setitem(ar_draw._state, "shader", None)
+    monkeypatch.setitem(ar_draw._state, "batch", None)
+    monkeypatch.setitem(ar_draw._state, "textures", None)
+    ctx = SimpleNamespace(scene=sc, region_data=SimpleNamespace(
+        perspective_matrix=Matrix.Identity(4)),
+        evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
+    group = ar_nodes.shadow_groups(ids.scene_key(sc))[ob.name]
+    for loc in ((0.0, 0.0, 0.0), (0.5, -0.2, 0.0)):
+        ob.location = loc
+        bpy.context.view_layer.update()
+        fake.log.clear()
+        ar_draw._draw_frame(ctx)
+        draws = [e for e in fake.log if isinstance(e, tuple) and e[0] == "draw"]
+        assert len(draws) == 1
+        centres, radii = _expected_spheres(ob, group)
+        assert np.abs(draws[0][1][:len(centres), :3] - centres).max() < 1e-5
+        blends = [e[1] for e in fake.log if isinstance(e, tuple) and e[0] == "blend"]
+        assert blends == ["MULTIPLY", "NONE"]
+    assert fake.created == 1 and sum(e == "batch" for e in fake.log) == 0   # built once
