@@ -11,11 +11,17 @@ can reach:
 * indirect light per leaf: rays from the leaf into each object's bounding cone (the only
   directions in which its view changes) replace, where they meet the object first, the room's
   solved radiosity behind it by the object's own.  The object's radiosity is one gather: the
-  lamps' direct light on it and the room's radiosity seen by cosine rays (and a second bounce
-  between objects);
+  lamps' direct light on it and the room's radiosity seen by cosine rays, with the object's own
+  shadow on the room taken off where they meet it (its underside sees the floor it shades),
+  and a second bounce between objects;
 * lamps that are not patches are cast again on the leaves that can be in an object's shadow;
 * that change of every leaf's irradiance, times its reflectance, propagates through the room's
-  own transport (one solve per lamp), and is read at the texels as the indirect light is.
+  own transport (one solve per lamp), and is read at the texels as the indirect light is;
+* near an object (a few bounding radii) the leaves are too coarse for what changes there: a
+  contact's dark ring is a few centimetres wide, and a wall beside an object sees the floor in
+  its shadow.  There the texels cast their own rays into the object's cone and over their
+  hemisphere (the room in the objects' shadows), and that replaces what they read of the
+  leaves' object term and first bounce.
 
 The maps gain (direct change + indirect change) / D, D the irradiance the photo was lit by, so
 they are untouched where the objects change nothing.
@@ -26,13 +32,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.patch import bilinear_point
 from ..geometry.raycast import make_occluder, ray_offset
 from ..geometry.sampling import cosine_directions, quadrature, random_points, \
     stratified_unit_square
 from ..lights import light_irradiance
 from ..radiosity.precompute import lights_on_elements
 from ..texture.mapping import inverse_bilinear, inverse_triangle, texel_subset
+from .direct import lamp_irradiance
 from .settled import may_be_shadowed, may_be_shadowed_at
+from .texel import footprint_points, texel_footprint_cells
 from .transport import Transport
 
 CONE_RAYS = 64          # per leaf and object, into the object's bounding cone
@@ -42,9 +51,13 @@ FACE_RAY_BUDGET = 1 << 18   # rays over all the objects' faces (a dense mesh: fe
 MIN_SOLID_ANGLE = 1e-3  # sr: an object seen smaller than this from a leaf changes nothing there
 # points per texel side for the objects' shadows (the maps' direct light has 2: a 10 cm texel
 # at a box's shadow edge needs more; office, box at its second position: 3.62 -> 3.16 CIEDE2000
-# in its shadow with 4)
+# in its shadow with 4); at most half the texel rays: a lamp's first rays meet every point
 FOOTPRINT = 4
+SHADE_RAYS = 8          # per lamp, from a room point an object's face sees (each face sees many)
 OBJECT_BOUNCES = 2      # gathers of the objects' radiosity (the second adds object to object)
+# bounding radii from an object's centre within which its change of the indirect light is cast
+# per texel (NEAR_IN), and past which the leaves' is read alone (NEAR_OUT); linear between
+NEAR_IN, NEAR_OUT = 2.5, 3.5
 
 
 class EitherOccluder:
@@ -120,7 +133,7 @@ def _leaf_lookup(sol):
     slot[sol.leaves] = np.arange(len(sol.leaves))
     corners = sol.scene.corners
 
-    def lookup(patch, x):
+    def lookup(patch, x, with_uv=False):
         c = corners[patch]
         n = h.normal[patch]
         e1 = c[:, 1] - c[:, 0]
@@ -139,24 +152,111 @@ def _leaf_lookup(sol):
             u[tri], v[tri] = inverse_triangle(c2[tri], q2[tri])[:2]
         u = np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)
         v = np.clip(np.nan_to_num(v, nan=0.5), 0.0, 1.0)
-        return slot[h.locate(patch, u, v)]
+        leaf = slot[h.locate(patch, u, v)]
+        return (leaf, u, v) if with_uv else leaf
     return lookup
 
 
-def _room_radiosity_along(sol, room, lookup, origins, directions):
-    """(k, n, 3) solved room radiosity first met along each ray (0 where none), the distance to
-    it, and whether it is a lamp patch."""
+class TexelChange:
+    """Per-texel values (k, T, 3) of a texel map of the solution's own patches, read at points
+    given by (patch, u, v): the texel whose square holds the point's texture coordinates."""
+
+    def __init__(self, scene, tm, values):
+        self.values = values
+        self.uv, self.image = scene.uv, scene.image
+        self.parts = []
+        for start, im in zip(tm.offsets[:-1], tm.images):
+            order = np.argsort(im.texel_index, kind="stable")
+            self.parts.append((np.asarray(im.texel_index)[order], start + order, im.shape))
+
+    def at(self, patch, u, v):
+        """(k, m, 3) the values at the points, and (m,) whether a texel holds each."""
+        out = np.zeros((self.values.shape[0], len(patch), 3))
+        found = np.zeros(len(patch), bool)
+        if self.uv is None or self.image is None or not len(patch):
+            return out, found
+        uv = bilinear_point(self.uv[patch][:, None], u[:, None], v[:, None])[:, 0]
+        image = self.image[patch]
+        for i, (pixels, texel, (H, W)) in enumerate(self.parts):
+            rows = np.flatnonzero(image == i)
+            if not len(rows) or not len(pixels):
+                continue
+            x = np.clip((uv[rows, 0] * W).astype(np.int64), 0, W - 1)
+            y = np.clip((uv[rows, 1] * H).astype(np.int64), 0, H - 1)
+            want = y * W + x
+            at = np.minimum(np.searchsorted(pixels, want), len(pixels) - 1)
+            ok = pixels[at] == want
+            out[:, rows[ok]] = self.values[:, texel[at[ok]]]
+            found[rows[ok]] = True
+        return out, found
+
+
+def _room_radiosity_along(sol, room, lookup, origins, directions, before=None, hits=False):
+    """(k, n, 3) solved room radiosity first met along each ray (0 where none, and where the
+    room is met no nearer than ``before`` (n,): hidden by something else), the distance to it,
+    and whether it is a lamp patch; with ``hits`` also the rays whose radiosity is read and the
+    leaf (in ``sol.leaves``) each meets."""
     k = len(sol.basis)
     t, prim = room.first_hit(origins, directions) if room is not None else \
         (np.full(len(origins), np.inf), np.full(len(origins), -1))
     B = np.zeros((k, len(origins), 3))
     lamp = np.zeros(len(origins), bool)
-    hit = np.flatnonzero(prim >= 0)
+    hit = np.flatnonzero((prim >= 0) if before is None else (prim >= 0) & (t < before))
+    leaf = np.zeros(0, np.int64)
     if len(hit):
         patch = room.patch_of_triangle[prim[hit]]
         leaf = lookup(patch, origins[hit] + t[hit, None] * directions[hit])
         B[:, hit] = sol.basis[:, leaf]
         lamp[hit] = sol.scene.lamp[patch] >= 0
+    return (B, t, lamp, hit, leaf) if hits else (B, t, lamp)
+
+
+def _shadow_on_room(objects: VirtualObjects, sol, room, lookup, p, patch, directions, scale,
+                    seed, texels=None):
+    """(k, m, 3) change of the room's radiosity at the points ``p`` (m, 3) of its patches
+    ``patch`` met by rays of ``directions``: the reflectance of the leaf there times the lamps'
+    direct light the objects take from the point: read from ``texels`` (a TexelChange of that
+    light per texel, as the maps have it) where a texel holds the point, else cast (SHADE_RAYS
+    rays per lamp); 0 on lamp patches, on a face's back and where no object can shadow."""
+    out = np.zeros((len(sol.basis), len(p), 3))
+    if not len(p):
+        return out
+    n = sol.hierarchy.normal[patch]
+    near = np.flatnonzero((sol.scene.lamp[patch] < 0)
+                          & (np.einsum("ij,ij->i", n, directions) < 0)
+                          & may_be_shadowed_at(sol.scene, p, np.zeros(len(p)),
+                                               objects.triangles))
+    if not len(near):
+        return out
+    leaf, u, v = lookup(patch[near], p[near], with_uv=True)
+    rho = np.asarray(sol.system.rho, float)[leaf]                                # (m, 3)
+    dE, found = (np.zeros((len(sol.basis), len(near), 3)), np.zeros(len(near), bool)) \
+        if texels is None else texels.at(patch[near], u, v)
+    cast = np.flatnonzero(~found)
+    if len(cast):
+        s = np.ones(len(sol.basis)) if sol.emission_scale is None else \
+            np.asarray(sol.emission_scale, float)
+        whole, past = lamp_irradiance(sol.scene, p[near[cast]], n[near[cast]],
+                                      ObjectsOnlyOccluder(room, objects.occluder), SHADE_RAYS,
+                                      int(seed), offset=ray_offset(scale))
+        dE[:, cast] = np.moveaxis((past - whole) * s[None, :, None], 1, 0)
+    out[:, near] = dE * rho[None]
+    return out
+
+
+def _room_radiosity_shadowed(objects: VirtualObjects, sol, room, lookup, origins, directions,
+                             before, scale, seed, texels=None):
+    """As :func:`_room_radiosity_along`, with the objects' shadows on the room
+    (:func:`_shadow_on_room`).  An object seen from its own faces is mostly the room near it,
+    which is in its shadow: a sphere's underside sees the floor where the sphere shades it,
+    not the lit floor of the photo."""
+    B, t, lamp, hit, leaf = _room_radiosity_along(sol, room, lookup, origins, directions,
+                                                  before, hits=True)
+    if len(hit):
+        p = origins[hit] + t[hit, None] * directions[hit]
+        patch = sol.hierarchy.patch[sol.leaves[leaf]]
+        B[:, hit] += _shadow_on_room(objects, sol, room, lookup, p, patch, directions[hit],
+                                     scale, seed, texels)
     return B, t, lamp
 
 
@@ -166,7 +266,7 @@ def _per_face(face, values, n):
                      for j in range(len(values))])
 
 
-def object_radiosity(objects: VirtualObjects, sol, room, lookup, scale, rays, seed):
+def object_radiosity(objects: VirtualObjects, sol, room, lookup, scale, rays, seed, texels=None):
     """(2, k, n, 3) radiosity of both sides (front, back) of every object face per lamp: its
     reflectance times the lamps' direct light on that side (``sol.scene.lights``) and the
     room's solved radiosity it sees (lamp patches included), with ``OBJECT_BOUNCES`` gathers
@@ -194,11 +294,12 @@ def object_radiosity(objects: VirtualObjects, sol, room, lookup, scale, rays, se
         x1, x2 = stratified_unit_square(len(pts.reshape(-1, 3)), per, rng)
         d = cosine_directions(nrm, x1.reshape(-1, 1), x2.reshape(-1, 1))
         o = np.repeat(pts.reshape(-1, 3), per, axis=0) + offset * nrm
-        B_room, t_room, _ = _room_radiosity_along(sol, room, lookup, o, d)
         t_obj, prim = objects.occluder.first_hit(o, d)
+        t_obj = np.where(prim >= 0, t_obj, np.inf)
+        B_room, t_room, _ = _room_radiosity_shadowed(objects, sol, room, lookup, o, d, t_obj,
+                                                     scale, rng.integers(2**31), texels)
         other = objects.occluder.patch_of_triangle[np.maximum(prim, 0)]
         obj_first = (prim >= 0) & (t_obj < t_room)
-        B_room[:, obj_first] = 0.0
         other_front = np.einsum("ij,ij->i", d, objects.normal[other]) < 0
         sides.append((H, _per_face(face, B_room, n), obj_first, other, other_front))
     count = np.bincount(face, minlength=n).astype(float)[None, :, None]
@@ -228,6 +329,55 @@ def _cone_directions(axis, cos_max, x1, x2):
         + cos_t[:, None] * axis
 
 
+def _cone_rays(c, R, o, n_o, x1, x2, rays):
+    """One ray per origin ``o`` (n, 3) (normals ``n_o``) into the bounding cone of the sphere
+    (c, R), from uniform numbers ``x1``, ``x2`` (n,): its directions and weights (the cone's
+    solid angle x cosine / pi over ``rays``, the rays an origin's group casts; from within the
+    sphere the whole hemisphere, cosine-distributed)."""
+    to = c - o
+    d_o = np.linalg.norm(to, axis=1)
+    inside = d_o <= R
+    cos_max = np.sqrt(np.maximum(1.0 - (R / np.maximum(d_o, 1e-300)) ** 2, 0.0))
+    d = _cone_directions(to / np.maximum(d_o, 1e-300)[:, None], cos_max, x1, x2)
+    cos_n = np.einsum("ij,ij->i", d, n_o)
+    w = 2.0 * np.pi * (1.0 - cos_max) / rays * np.maximum(cos_n, 0.0) / np.pi
+    if inside.any():
+        d[inside] = cosine_directions(n_o[inside], x1[inside, None], x2[inside, None])
+        w[inside] = 1.0 / rays
+    return d, w
+
+
+def _seen_through_cone(objects: VirtualObjects, obj, B_obj, sol, room, lookup, o, d, w, which,
+                       n):
+    """Sums per group (``which`` (r,) in 0..n-1) of the rays (o, d, w) cast into object
+    ``obj``'s cone, where they meet that object before the room: (k, n, 3) what the object
+    shows minus the room's radiosity it hides (lamp patches left out), and (k, n, 3) the lamp
+    patches' radiosity it hides (their direct light)."""
+    k = len(sol.basis)
+    ind, lamp_lost = np.zeros((k, n, 3)), np.zeros((k, n, 3))
+    live = np.flatnonzero(w > 0)
+    o, d, w, which = o[live], d[live], w[live], which[live]
+    t_obj, prim = objects.occluder.first_hit(o, d)
+    face = objects.occluder.patch_of_triangle[np.maximum(prim, 0)]
+    # a ray counts for the object whose cone it was cast in (another's cone covers the rest)
+    mine = (prim >= 0) & (objects.owner[face] == obj)
+    B_room, t_room, lamp = _room_radiosity_along(sol, room, lookup, o[mine], d[mine])
+    first = t_obj[mine] < t_room
+    idx = np.flatnonzero(mine)[first]
+    B_room, lamp = B_room[:, first], lamp[first]
+    front = np.einsum("ij,ij->i", d[idx], objects.normal[face[idx]]) < 0
+    gain = np.where(front[None, :, None], B_obj[0][:, face[idx]], B_obj[1][:, face[idx]])
+    # what the object shows replaces what was behind it (a lamp patch: direct light)
+    behind_lamp = np.where(lamp[None, :, None], B_room, 0.0)
+    behind_rest = B_room - behind_lamp
+    wi, at = w[idx], which[idx]
+    for j in range(k):
+        for ch in range(3):
+            ind[j, :, ch] = np.bincount(at, wi * (gain[j, :, ch] - behind_rest[j, :, ch]), n)
+            lamp_lost[j, :, ch] = np.bincount(at, wi * behind_lamp[j, :, ch], n)
+    return ind, lamp_lost
+
+
 def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
                 rays=CONE_RAYS):
     """Change of every leaf's irradiance per lamp (k, L, 3) where it sees an object (``B_obj``
@@ -253,43 +403,79 @@ def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
         if not len(sel):
             continue
         o = random_points(h.corners[leaves[sel]], rays, rng).reshape(-1, 3)
-        which = np.repeat(sel, rays)
-        n_o = nrm[which]
+        which = np.repeat(np.arange(len(sel)), rays)
+        n_o = nrm[sel][which]
         o = o + offset * n_o
         x1, x2 = stratified_unit_square(len(sel), rays, rng)
-        x1, x2 = x1.ravel(), x2.ravel()
-        to = c - o
-        d_o = np.linalg.norm(to, axis=1)
-        inside = d_o <= R
-        cos_max = np.sqrt(np.maximum(1.0 - (R / np.maximum(d_o, 1e-300)) ** 2, 0.0))
-        d = _cone_directions(to / np.maximum(d_o, 1e-300)[:, None], cos_max, x1, x2)
-        cos_n = np.einsum("ij,ij->i", d, n_o)
-        w = 2.0 * np.pi * (1.0 - cos_max) / rays * np.maximum(cos_n, 0.0) / np.pi
-        if inside.any():                       # within the sphere: the whole hemisphere
-            d[inside] = cosine_directions(n_o[inside], x1[inside, None], x2[inside, None])
-            w[inside] = 1.0 / rays
-        live = np.flatnonzero(w > 0)
-        o, d, w, which = o[live], d[live], w[live], which[live]
-        t_obj, prim = objects.occluder.first_hit(o, d)
-        face = objects.occluder.patch_of_triangle[np.maximum(prim, 0)]
-        # a ray counts for the object whose cone it was cast in (another's cone covers the rest)
-        mine = (prim >= 0) & (objects.owner[face] == obj)
-        B_room, t_room, lamp = _room_radiosity_along(sol, room, lookup, o[mine], d[mine])
-        first = t_obj[mine] < t_room
-        idx = np.flatnonzero(mine)[first]
-        B_room, lamp = B_room[:, first], lamp[first]
-        front = np.einsum("ij,ij->i", d[idx], objects.normal[face[idx]]) < 0
-        gain = np.where(front[None, :, None], B_obj[0][:, face[idx]], B_obj[1][:, face[idx]])
-        # what the object shows replaces what was behind it (a lamp patch: direct light)
-        behind_lamp = np.where(lamp[None, :, None], B_room, 0.0)
-        behind_rest = B_room - behind_lamp
-        wi, at = w[idx], which[idx]
-        for j in range(k):
-            for ch in range(3):
-                d_ind[j, :, ch] += np.bincount(at, wi * (gain[j, :, ch] - behind_rest[j, :, ch]),
-                                               L)
-                d_dir[j, :, ch] -= np.bincount(at, wi * behind_lamp[j, :, ch], L)
+        d, w = _cone_rays(c, R, o, n_o, x1.ravel(), x2.ravel(), rays)
+        ind, lost = _seen_through_cone(objects, obj, B_obj, sol, room, lookup, o, d, w, which,
+                                       len(sel))
+        d_ind[:, sel] += ind
+        d_dir[:, sel] -= lost
     return d_dir, d_ind
+
+
+def texel_indirect_change(objects: VirtualObjects, B_obj, sol, room, lookup, scene, tm, scale,
+                          seed, rays=CONE_RAYS, samples=FOOTPRINT, texels=None):
+    """The objects' change of the indirect light at the texels ``tm`` of ``scene`` near them,
+    cast per texel (``leaf_change`` casts it per leaf; a leaf read at its texels blurs a
+    contact's dark ring over the leaf): (T,) weight of this per-texel change against the
+    leaves' (1 within NEAR_IN bounding radii of an object, 0 past NEAR_OUT, linear between),
+    and (k, T, 3) the change (what the objects show minus the room's non-lamp radiosity they
+    hide), ``rays`` rays per texel over a ``samples`` x ``samples`` grid of its footprint."""
+    k, T = len(sol.basis), tm.n_texels
+    weight, out = np.zeros(T), np.zeros((k, T, 3))
+    if T == 0:
+        return weight, out
+    rng = np.random.default_rng([int(seed), 0x7E1])
+    x = bilinear_point(scene.corners[tm.patch][:, None], tm.u[:, None], tm.v[:, None])[:, 0]
+    nrm = scene.area_normal()[1][tm.patch]
+    offset = ray_offset(scale)
+    centre, size = texel_footprint_cells(tm)
+    for obj in range(len(objects.radius)):
+        c, R = objects.centre[obj], objects.radius[obj]
+        to_c = c - x
+        dist = np.linalg.norm(to_c, axis=1)
+        w_obj = np.clip((NEAR_OUT - dist / R) / (NEAR_OUT - NEAR_IN), 0.0, 1.0)
+        sel = np.flatnonzero((w_obj > 0) & (np.einsum("ij,ij->i", nrm, to_c) > -R))
+        if not len(sel):
+            continue
+        pts, S = footprint_points(scene, tm.patch[sel], tm.u[sel], tm.v[sel], centre[sel],
+                                  size[sel], samples)
+        pts = pts.reshape(len(sel), S, 3)
+        which = np.repeat(np.arange(len(sel)), rays)
+        n_o = nrm[sel][which]
+        o = pts[which, np.tile(np.arange(rays) % S, len(sel))] + offset * n_o
+        x1, x2 = stratified_unit_square(len(sel), rays, rng)
+        d, w = _cone_rays(c, R, o, n_o, x1.ravel(), x2.ravel(), rays)
+        ind, _ = _seen_through_cone(objects, obj, B_obj, sol, room, lookup, o, d, w, which,
+                                    len(sel))
+        out[:, sel] += ind
+        weight[sel] = np.maximum(weight[sel], w_obj[sel])
+    # the room near the objects, in their shadows, seen from the same texels (cosine rays over
+    # the hemisphere; what the objects hide of it is counted above)
+    sel = np.flatnonzero(weight > 0)
+    if not len(sel):
+        return weight, out
+    pts, S = footprint_points(scene, tm.patch[sel], tm.u[sel], tm.v[sel], centre[sel],
+                              size[sel], samples)
+    which = np.repeat(np.arange(len(sel)), rays)
+    n_o = nrm[sel][which]
+    o = pts.reshape(len(sel), S, 3)[which, np.tile(np.arange(rays) % S, len(sel))] \
+        + offset * n_o
+    x1, x2 = stratified_unit_square(len(sel), rays, rng)
+    d = cosine_directions(n_o, x1.reshape(-1, 1), x2.reshape(-1, 1))
+    t, prim = room.first_hit(o, d)
+    hit = np.flatnonzero(prim >= 0)
+    t_obj, got = objects.occluder.first_hit(o[hit], d[hit])
+    hit = hit[(got < 0) | (t_obj >= t[hit])]                      # not hidden by an object
+    dB = _shadow_on_room(objects, sol, room, lookup, o[hit] + t[hit, None] * d[hit],
+                         room.patch_of_triangle[prim[hit]], d[hit], scale, rng.integers(2**31),
+                         texels)
+    for j in range(k):
+        for ch in range(3):
+            out[j, sel, ch] += np.bincount(which[hit], dB[j, :, ch], len(sel)) / rays
+    return weight, out
 
 
 def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
@@ -345,7 +531,13 @@ def irradiance_change(result, objects: VirtualObjects, make_light, seed=0):
     if room is None or getattr(room, "patch_of_triangle", None) is None:
         room = sol.scene.make_occluder()
     lookup = _leaf_lookup(sol)
-    B_obj = object_radiosity(objects, sol, room, lookup, scale, q.rays, seed)
+    direct = texel_direct_change(result, objects, make_light, seed + 1)
+    texel_scene = result.scene if result.scene is not None else sol.scene
+    # the objects' shadows on the room where their rays meet it, as the maps have them (a
+    # radiosity proxy's patches are not the texels': there they are cast again)
+    texels = TexelChange(texel_scene, result.texel_map, direct) \
+        if sol.context.get("proxy") is None else None
+    B_obj = object_radiosity(objects, sol, room, lookup, scale, q.rays, seed, texels)
     d_dir, d_ind = leaf_change(objects, B_obj, sol, room, lookup, scale, seed)
     d_light = light_change(objects, sol, room, scale, q, seed)
     # What the leaves reflect of their change travels through the room's own links.
@@ -353,7 +545,19 @@ def irradiance_change(result, objects: VirtualObjects, make_light, seed=0):
     dE = rho[:, :, None] * np.moveaxis(d_dir + d_ind + d_light, 0, 2)             # (L, 3, k)
     dB = np.moveaxis(sol.system.solve(dE, q.solver, tol=q.tol)[0], 2, 0)          # (k, L, 3)
     tr = Transport(sol)
-    ind = d_ind + tr.per_lamp(tr.occ, dB) - tr.per_lamp(tr.dir_occ, dB)
+
+    def bounce(x):
+        return tr.per_lamp(tr.occ, x) - tr.per_lamp(tr.dir_occ, x)
+    ind = d_ind + bounce(dB)
     read = make_light(result.texel_map, result.occluder, seed, None).reader(sol)
     d_texel = np.stack([read(x) for x in ind])
-    return d_texel + texel_direct_change(result, objects, make_light, seed + 1)
+    # Near the objects, what they show and hide and the first bounce of their shadows are cast
+    # per texel instead of read from the leaves (which blur a contact's dark ring over a leaf).
+    w, near = texel_indirect_change(objects, B_obj, sol, room, lookup, texel_scene,
+                                    result.texel_map, scale, seed + 2, texels=texels)
+    sel = np.flatnonzero(w > 0)
+    if len(sel):
+        first = d_ind + bounce(rho[None] * (d_dir + d_light))
+        leaf_read = np.stack([read(x)[sel] for x in first])
+        d_texel[:, sel] += w[sel, None] * (near[:, sel] - leaf_read)
+    return d_texel + direct
