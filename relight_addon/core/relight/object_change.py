@@ -45,7 +45,10 @@ from .settled import may_be_shadowed, may_be_shadowed_at
 from .texel import footprint_points, texel_footprint_cells
 from .transport import Transport
 
-CONE_RAYS = 64          # per leaf and object, into the object's bounding cone
+CONE_RAYS = 64          # per texel near an object and object, into the object's bounding cone
+# per leaf and object: the leaves' change travels through the room's transport, which
+# smooths it, and near the objects the texels' own rays replace it
+LEAF_RAYS = 32
 FACE_RAYS = 32          # per side of an object face, gathering the room's radiosity (office: 128
                         # gave the same shadows within 0.07 CIEDE2000 for 0.3 s more)
 FACE_RAY_BUDGET = 1 << 18   # rays over all the objects' faces (a dense mesh: fewer per face)
@@ -60,6 +63,9 @@ OBJECT_BOUNCES = 2      # gathers of the objects' radiosity (the second adds obj
 # per texel (NEAR_IN), and past which the leaves' is read alone (NEAR_OUT); linear between
 NEAR_IN, NEAR_OUT = 2.5, 3.5
 NEAR_PASSES = 2         # gathers near the objects (the second sees the first's whole change)
+# within NEAR_DENSE bounding radii of an object a texel casts CONE_RAYS rays, past it (where the
+# change is small, and its noise with it) CONE_RAYS // FAR_SHARE
+NEAR_DENSE, FAR_SHARE = 1.6, 4
 
 
 class EitherOccluder:
@@ -447,7 +453,7 @@ def _seen_through_cone(objects: VirtualObjects, obj, B_obj, sol, room, lookup, o
 
 
 def leaf_change(objects: VirtualObjects, B_obj, sol, room, lookup, scale, seed,
-                rays=CONE_RAYS):
+                rays=LEAF_RAYS):
     """Change of every leaf's irradiance per lamp (k, L, 3) where it sees an object (``B_obj``
     (2, k, n, 3): its faces' fronts and backs): (from lamp patches, from the rest), both at the
     solution's exitance factors."""
@@ -491,14 +497,15 @@ class NearChange:
     calling it with the objects' radiosity ``B_obj`` and a change of the room's light per texel
     ``texels`` gives (k, T, 3): what the objects show minus the room's non-lamp radiosity they
     hide, and the room near them in that change, seen from the same texels (cosine rays over
-    the hemisphere).  ``rays`` rays per texel over a ``samples`` x ``samples`` grid of its
-    footprint, cast once."""
+    the hemisphere).  ``rays`` rays per texel within NEAR_DENSE bounding radii of an object,
+    ``rays // FAR_SHARE`` past it, over a ``samples`` x ``samples`` grid of its footprint, cast
+    once."""
 
     def __init__(self, objects: VirtualObjects, sol, room, lookup, scene, tm, scale, seed,
                  rays=CONE_RAYS, samples=FOOTPRINT, texels=None, lit=None):
         self.k, self.T = len(sol.basis), tm.n_texels
         self.weight = np.zeros(self.T)
-        self.cones, self.seen = [], None
+        self.cones, self.seen = [], []
         if self.T == 0:
             return
         rng = np.random.default_rng([int(seed), 0x7E1])
@@ -506,58 +513,62 @@ class NearChange:
         nrm = scene.area_normal()[1][tm.patch]
         offset = ray_offset(scale)
         centre, size = texel_footprint_cells(tm)
+        dense = np.zeros(self.T, bool)
+        for obj in range(len(objects.radius)):
+            dist = np.linalg.norm(objects.centre[obj] - x, axis=1) / objects.radius[obj]
+            dense |= dist < NEAR_DENSE
+        tiers = ((dense, rays), (~dense, max(rays // FAR_SHARE, 1)))
+
+        def origins(sel, n):
+            pts, S = footprint_points(scene, tm.patch[sel], tm.u[sel], tm.v[sel], centre[sel],
+                                      size[sel], samples)
+            which = np.repeat(np.arange(len(sel)), n)
+            n_o = nrm[sel][which]
+            o = pts.reshape(len(sel), S, 3)[which, np.tile(np.arange(n) % S, len(sel))] \
+                + offset * n_o
+            return o, n_o, which
         for obj in range(len(objects.radius)):
             c, R = objects.centre[obj], objects.radius[obj]
             to_c = c - x
             dist = np.linalg.norm(to_c, axis=1)
             w_obj = np.clip((NEAR_OUT - dist / R) / (NEAR_OUT - NEAR_IN), 0.0, 1.0)
-            sel = np.flatnonzero((w_obj > 0) & (np.einsum("ij,ij->i", nrm, to_c) > -R))
-            if not len(sel):
-                continue
-            pts, S = footprint_points(scene, tm.patch[sel], tm.u[sel], tm.v[sel], centre[sel],
-                                      size[sel], samples)
-            pts = pts.reshape(len(sel), S, 3)
-            which = np.repeat(np.arange(len(sel)), rays)
-            n_o = nrm[sel][which]
-            o = pts[which, np.tile(np.arange(rays) % S, len(sel))] + offset * n_o
-            x1, x2 = stratified_unit_square(len(sel), rays, rng)
-            d, w = _cone_rays(c, R, o, n_o, x1.ravel(), x2.ravel(), rays)
-            self.cones.append((sel, _ConeHits(objects, obj, sol, room, lookup, o, d, w, which,
-                                              len(sel), lit)))
-            self.weight[sel] = np.maximum(self.weight[sel], w_obj[sel])
+            near = (w_obj > 0) & (np.einsum("ij,ij->i", nrm, to_c) > -R)
+            for tier, n in tiers:
+                sel = np.flatnonzero(near & tier)
+                if not len(sel):
+                    continue
+                o, n_o, which = origins(sel, n)
+                x1, x2 = stratified_unit_square(len(sel), n, rng)
+                d, w = _cone_rays(c, R, o, n_o, x1.ravel(), x2.ravel(), n)
+                self.cones.append((sel, _ConeHits(objects, obj, sol, room, lookup, o, d, w,
+                                                  which, len(sel), lit)))
+            self.weight[near] = np.maximum(self.weight[near], w_obj[near])
         # the room near the objects seen from the same texels (what the objects hide of it is
         # counted above)
-        self.sel = sel = np.flatnonzero(self.weight > 0)
-        if not len(sel):
-            return
-        pts, S = footprint_points(scene, tm.patch[sel], tm.u[sel], tm.v[sel], centre[sel],
-                                  size[sel], samples)
-        which = np.repeat(np.arange(len(sel)), rays)
-        n_o = nrm[sel][which]
-        o = pts.reshape(len(sel), S, 3)[which, np.tile(np.arange(rays) % S, len(sel))] \
-            + offset * n_o
-        x1, x2 = stratified_unit_square(len(sel), rays, rng)
-        d = cosine_directions(n_o, x1.reshape(-1, 1), x2.reshape(-1, 1))
-        t, prim = room.first_hit(o, d)
-        hit = np.flatnonzero(prim >= 0)
-        t_obj, got = objects.occluder.first_hit(o[hit], d[hit])
-        hit = hit[(got < 0) | (t_obj >= t[hit])]                  # not hidden by an object
-        self.which, self.rays = which[hit], rays
-        self.seen = _RoomSeen(objects, sol, room, lookup, o[hit] + t[hit, None] * d[hit],
-                              room.patch_of_triangle[prim[hit]], d[hit], scale,
-                              rng.integers(2**31), texels)
+        for tier, n in tiers:
+            sel = np.flatnonzero((self.weight > 0) & tier)
+            if not len(sel):
+                continue
+            o, n_o, which = origins(sel, n)
+            x1, x2 = stratified_unit_square(len(sel), n, rng)
+            d = cosine_directions(n_o, x1.reshape(-1, 1), x2.reshape(-1, 1))
+            t, prim = room.first_hit(o, d)
+            hit = np.flatnonzero(prim >= 0)
+            t_obj, got = objects.occluder.first_hit(o[hit], d[hit])
+            hit = hit[(got < 0) | (t_obj >= t[hit])]              # not hidden by an object
+            self.seen.append((sel, which[hit], n, _RoomSeen(
+                objects, sol, room, lookup, o[hit] + t[hit, None] * d[hit],
+                room.patch_of_triangle[prim[hit]], d[hit], scale, rng.integers(2**31), texels)))
 
     def __call__(self, B_obj, texels=None):
         out = np.zeros((self.k, self.T, 3))
         for sel, cone in self.cones:
             out[:, sel] += cone.sums(B_obj)[0]
-        if self.seen is None:
-            return out
-        dB = self.seen.change(texels)
-        for j in range(self.k):
-            for ch in range(3):
-                out[j, self.sel, ch] += np.bincount(self.which, dB[j, :, ch],
-                                                    len(self.sel)) / self.rays
+        for sel, which, n, seen in self.seen:
+            dB = seen.change(texels)
+            for j in range(self.k):
+                for ch in range(3):
+                    out[j, sel, ch] += np.bincount(which, dB[j, :, ch], len(sel)) / n
         return out
 
 
