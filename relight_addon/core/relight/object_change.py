@@ -21,7 +21,11 @@ can reach:
   contact's dark ring is a few centimetres wide, and a wall beside an object sees the floor in
   its shadow.  There the texels cast their own rays into the object's cone and over their
   hemisphere (the room in the objects' shadows), and that replaces what they read of the
-  leaves' object term and first bounce.
+  leaves' object term and first bounce;
+* the object and the room near it see each other in their change (a sphere's underside sees
+  the floor it darkens, which sees it): the objects' radiosity and the texels near them are
+  gathered again along the same rays, from the room's whole change of the first gather, and
+  the room they see is read per texel (the maps' light there), not per leaf.
 
 The maps gain (direct change + indirect change) / D, D the irradiance the photo was lit by, so
 they are untouched where the objects change nothing.
