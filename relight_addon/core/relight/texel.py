@@ -176,10 +176,7 @@ class TexelLight:
         O = np.zeros((k, T)) if luminance_only else np.zeros((T, k, 3))
         patch, u, v = tm.patch, tm.u, tm.v
         shading = self._shading()
-        parts = [im for im in tm.images if len(im)]
-        centre = np.concatenate([im.uv for im in parts]) if parts else np.zeros((0, 2))
-        size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
-                               for im in parts]) if parts else np.zeros((0, 2))
+        centre, size = texel_footprint_cells(tm)
 
         def chunk(c0):
             # chunks start at multiples of TEXEL_CHUNK of the whole map, whatever block this is
@@ -218,6 +215,16 @@ def leaf_indirect(sol, unoccluded=True):
     solution."""
     Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
     return Hocc_k - Docc_k, (HU_k - DU_k if unoccluded else None)
+
+
+def texel_footprint_cells(tm):
+    """(T, 2) UV centre of every texel of ``tm`` and (T, 2) the size (width, height, texels)
+    of its image: what :func:`footprint_points` spreads a texel's points by."""
+    parts = [im for im in tm.images if len(im)]
+    centre = np.concatenate([im.uv for im in parts]) if parts else np.zeros((0, 2))
+    size = np.concatenate([np.repeat([[im.shape[1], im.shape[0]]], len(im), axis=0)
+                           for im in parts]) if parts else np.zeros((0, 2))
+    return centre, size
 
 
 def footprint_points(scene, patch, u, v, centre, size, samples):

@@ -162,10 +162,11 @@ def add_objects(result, scene, progress=None):
     virtual = VirtualObjects.of(objects, extra)
     if not len(virtual.triangles):                  # no face that can block or reflect
         return dataclasses.replace(result, room=result)
-    delta = irradiance_change(result, virtual, make_light, opt.seed + 202)
     D = np.maximum(np.asarray(result.denominator, float), 0.0)                   # (T, 3)
     lit = D >= np.maximum(DISPLAY_EPS * D.max(axis=0, initial=0.0), 1e-300)
     old = _texel_maps(result)
+    # each lamp's light per texel as the maps show it: the room the objects see, texel by texel
+    delta = irradiance_change(result, virtual, make_light, opt.seed + 202, old * D[None])
     new = np.where(lit[None], np.maximum(old + delta / np.where(lit, D, 1.0)[None], 0.0), old)
     new_maps, _ = map_images(result.texel_map, new)
     return dataclasses.replace(result, maps=new_maps, room=result)
