@@ -9,7 +9,7 @@ worker thread with progress and Esc to cancel from the sidebar (precompute._Pipe
 import bpy
 
 from .base import RelightOperator
-from .precompute import _PipelineRunner, _busy_reason
+from .precompute import _PipelineRunner, busy_reason
 
 
 def _ar():
@@ -56,7 +56,7 @@ class RELIGHT_OT_ar_clear(RelightOperator, bpy.types.Operator):
 
     @classmethod
     def disabled_reason(cls, context):
-        reason = _busy_reason()
+        reason = busy_reason()
         if reason:
             return reason
         if not _ar().is_set_up(context.scene):

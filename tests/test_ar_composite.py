@@ -27,17 +27,12 @@ against its own Cycles truth with the objects where they then are.
 """
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 import pytest
 
 pytest.importorskip("bpy")
 pytest.importorskip("colour")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 import ar_composite as C  # noqa: E402
 import ar_truth as T  # noqa: E402
 

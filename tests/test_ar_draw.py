@@ -12,7 +12,6 @@ shader, from a scene after ``bpy.ops.relight.ar_setup()``, run on a headless Ope
 """
 from __future__ import annotations
 
-import os
 import sys
 
 import numpy as np
@@ -20,15 +19,13 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-import test_ar_setup as A  # noqa: E402
+from helpers import ar as A  # noqa: E402
 
 pytestmark = pytest.mark.skipif("sunrise" not in A.HDRIS, reason="bundled HDRIs not found")
 
 
 def test_no_draw_handler_in_background_mode():
-    ar_draw = A._mod("ar_draw")
+    ar_draw = A.ar_module("ar_draw")
     assert bpy.app.background
     assert ar_draw.register_draw() is False and not ar_draw.is_registered()
 
@@ -85,7 +82,7 @@ def test_the_handler_draws_the_twin_and_follows_a_move(tmp_path):
     pytest.importorskip("moderngl")
     sc, ob = A.build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar, ar_draw, ar_nodes, ids = (A._mod(n) for n in ("ar", "ar_draw", "ar_nodes", "ids"))
+    ar, ar_draw, ar_nodes, ids = (A.ar_module(n) for n in ("ar", "ar_draw", "ar_nodes", "ids"))
     from relight_addon.core.ar.env_shadow import env_shadow_factor
     from relight_addon.core.ar.shader_data import shadow_textures
     st = ar.state(sc)
@@ -244,7 +241,7 @@ def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
     from mathutils import Matrix
     sc, ob = A.build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar_draw, ar_nodes, ids = (A._mod(n) for n in ("ar_draw", "ar_nodes", "ids"))
+    ar_draw, ar_nodes, ids = (A.ar_module(n) for n in ("ar_draw", "ar_nodes", "ids"))
     fake = _FakeGpu()
     monkeypatch.setitem(sys.modules, "gpu", fake.gpu)
     monkeypatch.setitem(sys.modules, "gpu_extras.batch", fake.batch)

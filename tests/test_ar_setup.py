@@ -17,80 +17,18 @@ tests of the render itself, against Cycles truth, are in test_ar_composite.py).
 from __future__ import annotations
 
 import importlib
-import os
-import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 import ar_composite_scenes as S  # noqa: E402
-import ar_truth as T  # noqa: E402
 from blendstate import user_state  # noqa: E402
-from scenes.addon import PACKAGE, register_repo_addon  # noqa: E402
+from helpers.ar import HDRIS, ar_module, build, snapshot  # noqa: E402
+from scenes.addon import PACKAGE  # noqa: E402
 
-HDRIS = T.bundled_hdris()
-RES = (64, 48)
 pytestmark = pytest.mark.skipif("sunrise" not in HDRIS, reason="bundled HDRIs not found")
-
-
-def _mod(name):
-    register_repo_addon()
-    return importlib.import_module(f"{PACKAGE}.relight_addon.blender.{name}")
-
-
-def _photo(tmp_path):
-    """A small photo file (the set's colours: what a receiver shows)."""
-    path = str(tmp_path / "photo.png")
-    img = bpy.data.images.new("photo_src", *RES)
-    px = np.empty((RES[1], RES[0], 4), np.float32)
-    px[...] = (0.45, 0.47, 0.5, 1.0)
-    px[: RES[1] // 2] = (0.5, 0.6, 0.8, 1.0)
-    img.pixels.foreach_set(px.ravel())
-    img.filepath_raw = path
-    img.file_format = "PNG"
-    img.save()
-    bpy.data.images.remove(img)
-    return path
-
-
-def build(tmp_path, hdri="sunrise"):
-    """The user's AR scene: (scene, the virtual sphere)."""
-    register_repo_addon()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    register_repo_addon()
-    S.build("ground", "sphere", HDRIS[hdri], with_object=False, res=RES)
-    sc = bpy.context.scene
-    bg = sc.camera.data.background_images.new()
-    bg.image = bpy.data.images.load(_photo(tmp_path))
-    for o in S.set_objects():
-        o["relight_role"] = "receiver"
-    # a coarse sphere: the fit's cost is the winding number's (cells x triangles)
-    ob = S.add_object("sphere", "ground", tri=S.ar_scenes.uv_sphere(n_lat=8, n_lon=16))
-    ob["relight_role"] = "virtual"
-    ob["relight_spheres"] = 8
-    bpy.context.view_layer.update()
-    return sc, ob
-
-
-def snapshot():
-    """Everything a failed Set Up must leave as it was."""
-    sc = bpy.context.scene
-    out = {c: sorted(d.name for d in getattr(bpy.data, c))
-           for c in ("objects", "meshes", "materials", "images", "node_groups", "worlds",
-                     "cameras", "scenes")}
-    out["slots"] = {o.name: [s.material.name if s.material else None for s in o.material_slots]
-                    for o in bpy.data.objects}
-    out["props"] = {o.name: sorted(o.keys()) for o in bpy.data.objects}
-    out["scene_props"] = sorted(sc.keys())
-    out["settings"] = (sc.render.film_transparent, sc.view_settings.view_transform,
-                       getattr(sc.compositing_node_group, "name", None),
-                       [a.name for layer in sc.view_layers for a in layer.aovs])
-    out["user"] = user_state(bpy)
-    return out
 
 
 def test_setup_writes_the_composite(tmp_path):
@@ -100,7 +38,7 @@ def test_setup_writes_the_composite(tmp_path):
     ground = bpy.data.objects["Ground"]
     orig = ground.material_slots[0].material
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar, ar_nodes, ids = _mod("ar"), _mod("ar_nodes"), _mod("ids")
+    ar, ar_nodes, ids = ar_module("ar"), ar_module("ar_nodes"), ar_module("ids")
     assert ar.is_set_up(sc)
     mat = ground.material_slots[0].material
     assert mat is not orig and mat.get("relight_ar_material") == "receiver"
@@ -140,7 +78,7 @@ def test_moving_the_object_moves_its_spheres(tmp_path):
     compositor reads, to where the object's matrix puts its fitted spheres."""
     sc, ob = build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar_nodes, ids = _mod("ar_nodes"), _mod("ids")
+    ar_nodes, ids = ar_module("ar_nodes"), ar_module("ids")
     group = ar_nodes.shadow_groups(ids.scene_key(sc))[ob.name]
     local = np.asarray(group["relight_ar_spheres"], float).reshape(-1, 4)[:, :3]
     for loc, rot, scale in (((0.4, -0.3, 0.0), (0, 0, 0.7), 1.0),
@@ -215,7 +153,7 @@ def test_bad_input_is_one_sentence_and_changes_nothing(tmp_path, case):
 def test_update_follows_a_new_object_and_a_new_environment(tmp_path):
     sc, ob = build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar, ar_nodes, ids = _mod("ar"), _mod("ar_nodes"), _mod("ids")
+    ar, ar_nodes, ids = ar_module("ar"), ar_module("ar_nodes"), ar_module("ids")
     first = ar.state(sc)
     box = S._mesh("Box", S.ar_scenes.box([0.6, 0.4, 0.0], [0.9, 0.7, 0.3]), smooth=False)
     box["relight_role"] = "virtual"
@@ -244,7 +182,7 @@ def test_clear_puts_everything_back(tmp_path):
     for k in ("objects", "meshes", "materials", "node_groups", "worlds", "slots", "settings"):
         assert after[k] == before[k], k
     assert {n for n in after["images"]} == {n for n in before["images"]}
-    assert not _mod("ar").is_set_up(sc)
+    assert not ar_module("ar").is_set_up(sc)
 
 
 def test_undo_set_up(tmp_path):
@@ -264,9 +202,9 @@ def test_undo_set_up(tmp_path):
     for k in before:
         if k != "images":          # the photo, packed by Set Up, is the same datablock
             assert now[k] == before[k], k
-    assert not _mod("ar").is_set_up(bpy.context.scene)
+    assert not ar_module("ar").is_set_up(bpy.context.scene)
     bpy.ops.ed.redo()
-    assert _mod("ar").is_set_up(bpy.context.scene)
+    assert ar_module("ar").is_set_up(bpy.context.scene)
     assert snapshot()["slots"] == after["slots"]
 
 
@@ -319,7 +257,7 @@ def test_every_driver_is_a_simple_expression(tmp_path):
     Set Up made is one Blender evaluates without Python (its own is_simple_expression flag)."""
     sc, ob = build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ids = _mod("ids")
+    ids = ar_module("ids")
     key = ids.scene_key(sc)
     owners = [g for g in bpy.data.node_groups if ids.ours(g, key)]
     owners += [m.node_tree for m in bpy.data.materials if ids.ours(m, key) and m.node_tree]
@@ -336,7 +274,7 @@ def test_update_after_the_last_object_is_removed(tmp_path):
     the last one was deleted keeps the composite (the receivers show the photo) and warns."""
     sc, ob = build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
-    ar, ar_nodes, ids = _mod("ar"), _mod("ar_nodes"), _mod("ids")
+    ar, ar_nodes, ids = ar_module("ar"), ar_module("ar_nodes"), ar_module("ids")
     bpy.data.objects.remove(ob)
     bpy.context.view_layer.update()
     assert bpy.ops.relight.update() == {"FINISHED"}
