@@ -105,6 +105,28 @@ def _bake(obj, mat):
     return px.reshape(BAKE, BAKE, 4)
 
 
+def _unshadowed_bake(obj, mat):
+    """The EMIT bake's first channel of ``mat`` without the moving objects' shadows: the shadow
+    factors ("S <lamp>" nodes' Scale) unlinked and the output fed by the material's own closure
+    (the one sphere_nodes replaced), then back."""
+    tree = mat.node_tree
+    surface = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                   and n.is_active_output).inputs["Surface"]
+    wired = surface.links[0].from_socket
+    factors = {}
+    for node in tree.nodes:
+        if node.name.startswith("S ") and node.inputs["Scale"].is_linked:
+            factors[node.name] = node.inputs["Scale"].links[0].from_socket
+            tree.links.remove(node.inputs["Scale"].links[0])
+    tree.links.new(tree.nodes[mat[_nodes().SURFACE_KEY]].outputs[0], surface)
+    try:
+        return _bake(obj, mat)[..., 0]
+    finally:
+        tree.links.new(wired, surface)
+        for name, src in factors.items():
+            tree.links.new(src, tree.nodes[name].inputs["Scale"])
+
+
 def _emit_material(name, source):
     """A material emitting what ``source(tree)`` returns (a socket)."""
     mat = bpy.data.materials.new(name)
@@ -166,12 +188,8 @@ def test_node_groups_match_their_numpy_twin(room):
                 lamps[other].data.energy = powers[other] if other == name else 0.0
             bpy.context.view_layer.update()
             shadowed = _bake(floor, mat)[..., 0].reshape(-1)
-            s_input = mat.node_tree.nodes[f"S {name}"].inputs["Scale"]
-            link = s_input.links[0]
-            src = link.from_socket
-            mat.node_tree.links.remove(link)
-            plain = _bake(floor, mat)[..., 0].reshape(-1)
-            mat.node_tree.links.new(src, s_input)
+            assert mat.node_tree.nodes[f"S {name}"].inputs["Scale"].is_linked
+            plain = _unshadowed_bake(floor, mat).reshape(-1)
             m_image = mat.node_tree.nodes[f"M {name}"].image
             assert _alpha(m_image).shape == (16, 16)
             a = _bake(floor, _alpha_material(m_image))[..., 0].reshape(-1)   # as shaded
@@ -553,12 +571,7 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     bpy.context.view_layer.update()
     try:
         shadowed = _bake(floor, mat)[..., 0]
-        s_input = mat.node_tree.nodes["S LampA"].inputs["Scale"]
-        link = s_input.links[0]
-        src = link.from_socket
-        mat.node_tree.links.remove(link)
-        plain = _bake(floor, mat)[..., 0]
-        mat.node_tree.links.new(src, s_input)
+        plain = _unshadowed_bake(floor, mat)
         a = _bake(floor, _alpha_material(mat.node_tree.nodes["M LampA"].image))[..., 0]
 
         def colour(nt):                       # the settled image as the material samples it
