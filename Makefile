@@ -4,8 +4,9 @@
 #   make test-quick  the tests not marked slow (under 5 minutes)
 #   make layers      the import contracts of .importlinter (import-linter; make test checks them too)
 #   make demo        solve the embedded Cornell box (out/cornell.png), then relight the photographed
-#                    office through the operator (EEVEE frames, Cycles truth, out/demo_side_by_side.png,
-#                    out/demo.blend; copy in benchmarks/results/demo_office.png)
+#                    office through the operators: a lamp off, a virtual lamp and a virtual box
+#                    (EEVEE frames, Cycles truth, out/demo_side_by_side.png, out/demo.blend); writes
+#                    under out/ only (`make demo-results` also updates benchmarks/results/)
 #   make extension   download the runtime wheels per platform, build dist/relight-*-<platform>.zip
 #   make test-lts    the same tests against Blender 4.2 LTS (bpy 4.2) in .venv-lts
 #   make test-cache  render again the Cycles bakes and Mitsuba references shipped in
@@ -30,7 +31,7 @@ REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
 STAMP     := $(VENV)/.requirements-stamp
 STAMP_LTS := $(LTS)/.requirements-stamp
 
-.PHONY: test test-quick layers demo extension wheels test-lts test-cache validate clean distclean venv venv-lts
+.PHONY: test test-quick layers demo demo-results extension wheels test-lts test-cache validate clean distclean venv venv-lts
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
@@ -45,6 +46,11 @@ layers: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/python -m demo.cornell
 	$(VENV)/bin/python -m demo.office
+
+# the demo, and its pictures copied into benchmarks/results (tracked: a deliberate update)
+demo-results: $(STAMP)
+	$(VENV)/bin/python -m demo.cornell --results benchmarks/results/cornell_demo.png
+	$(VENV)/bin/python -m demo.office --results benchmarks/results/demo_office.png
 
 venv: $(STAMP)
 venv-lts: $(STAMP_LTS)

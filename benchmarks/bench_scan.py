@@ -299,6 +299,7 @@ def write(records, path_md, path_png):
                    label="precompute memory (100 MB)")
         ax[0].plot(f, [r["estimate_mb"] / 100 for r in s], "x--", label="estimate (100 MB)")
         ax[0].set_xlabel("faces of the scan")
+        ax[0].set_ylabel("seconds, or hundreds of MB")
         ax[0].set_title("room 0, medium")
         ax[0].legend()
     if curve:

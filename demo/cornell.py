@@ -58,6 +58,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--preset", default="high")
     parser.add_argument("--out", default="out")
+    parser.add_argument("--results", default="",
+                        help="also copy the picture there (e.g. benchmarks/results/cornell.png)")
     args = parser.parse_args(argv)
 
     scene = cornell_box(front_wall=False)          # the classic open box, seen from the front
@@ -75,6 +77,9 @@ def main(argv=None):
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "cornell.png")
     fig.savefig(path)
+    if args.results:
+        import shutil
+        shutil.copyfile(path, args.results)
     st = sol.stats()
     print(f"Cornell box, preset {args.preset}: {st['elements']} elements, {st['leaves']} leaves, "
           f"{st['links']} links, solved in {elapsed:.2f} s (residual {st['residual']:.1e}) -> {path}")

@@ -28,10 +28,14 @@ Steps (all headless, bpy as a module):
    OpenImageDenoise on by default: at 64 samples the raw render is grainy, mean |diff| of frame 1
    3.4/255 without vs 2.3/255 with it; ``--no-denoise`` for the raw one), then the relit
    materials are put back.
-5. out/demo_side_by_side.png: original (EEVEE frame 1) | relit (EEVEE frame 3) | Cycles truth
-   (frame 3), copied to benchmarks/results/demo_office.png; out/demo_diff.png: |relit - truth|
-   x 4 for frames 1 and 3 (where the relit frames are wrong); out/demo.blend (everything packed,
-   relit materials assigned, frame 1).
+5. Frame 4: a virtual point lamp (not in the photo) and a virtual grey box (Exact shadows) are
+   added and ``bpy.ops.relight.update()`` puts them into the maps (no new solve); lamp A off,
+   lamp B at P, the virtual lamp on: EEVEE and its Cycles truth (the box really in the scene).
+6. out/demo_side_by_side.png: original (EEVEE frame 1) | lamp A off, B doubled (frame 3) |
+   virtual lamp and box (frame 4) | Cycles truth of frame 4 (``--results PATH`` copies it, e.g.
+   to benchmarks/results/demo_office.png: `make demo-results`); out/demo_diff.png: |relit -
+   truth| x 4 for frames 1, 3 and 4; out/demo.blend (everything packed, relit materials
+   assigned, frame 1).  The demo writes under ``--out`` only.
 
 The photo's shadows of lamp A are removed from T_final (per texel), so with lamp A off the
 relit frames lose them as the Cycles truth does.  The frame-3 difference is the shadow removal's
@@ -53,6 +57,8 @@ from scenes.addon import register_repo_addon
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAMES = (1, 2, 3)
+VIRTUAL_AT, VIRTUAL_W = (1.2, 2.6, 2.0), 80.0       # a virtual point lamp (frame 4)
+BOX_AT, BOX_SIZE = (3.6, 1.0, 0.25), 0.5            # a virtual box on the floor (frame 4)
 
 
 def lamp_schedule(powers):
@@ -176,9 +182,9 @@ def main(argv=None):
     parser.add_argument("--cycles-samples", type=int, default=64)
     parser.add_argument("--no-denoise", dest="denoise", action="store_false",
                         help="Cycles truth without the OpenImageDenoise pass (noisier)")
-    parser.add_argument("--results", default=os.path.join(ROOT, "benchmarks", "results",
-                                                          "demo_office.png"),
-                        help="copy of the side-by-side picture ('' to skip)")
+    parser.add_argument("--results", default="",
+                        help="also copy the side-by-side picture there (e.g. "
+                             "benchmarks/results/demo_office.png)")
     args = parser.parse_args(argv)
     res = tuple(int(v) for v in args.res.lower().split("x"))
 
@@ -262,11 +268,55 @@ def main(argv=None):
             bpy.data.objects[o].material_slots[0].material = m
     times["Cycles truth, 2 frames"] = time.perf_counter() - t0
 
-    # 5. Pictures and numbers.
+    # 5. A virtual lamp and a virtual box, through Update (no new solve).
+    from scenes.materials import grey_diffuse
+    scene.frame_set(3)
+    light = bpy.data.lights.new("Virtual lamp", "POINT")
+    light.energy = VIRTUAL_W
+    light.shadow_soft_size = 0.1
+    lamp = bpy.data.objects.new("Virtual lamp", light)
+    lamp.location = VIRTUAL_AT
+    scene.collection.objects.link(lamp)
+    bpy.ops.mesh.primitive_cube_add(size=BOX_SIZE, location=BOX_AT)
+    box = bpy.context.active_object
+    box.name = "Virtual box"
+    box.data.materials.append(grey_diffuse(bpy))
+    box.relight_role = "virtual"
+    bpy.context.view_layer.update()
+    t0 = time.perf_counter()
+    result = bpy.ops.relight.update()
+    times["update: virtual lamp and box"] = time.perf_counter() - t0
+    if "FINISHED" not in result:
+        raise SystemExit(f"relight.update returned {result}")
+    for f, p in ((1, 0.0), (3, 0.0), (4, VIRTUAL_W)):     # on at frame 4 only
+        light.energy = p
+        light.keyframe_insert("energy", frame=f)
+    frame4 = {"Lamp A": 0.0, "Lamp B": powers0["Lamp B"]}
+    for name, p in frame4.items():
+        bpy.data.objects[name].data.energy = p
+        bpy.data.objects[name].data.keyframe_insert("energy", frame=4)
+    scene.frame_set(4)
+    scene.render.engine = eevee
+    frames[4] = os.path.join(out, "frame_0004.png")
+    scene.render.filepath = frames[4]
+    bpy.ops.render.render(write_still=True)
+    scene.render.engine = "CYCLES"
+    try:
+        for o, m in truth_mats.items():
+            bpy.data.objects[o].material_slots[0].material = m
+        truth[4] = os.path.join(out, "truth_0004.png")
+        scene.render.filepath = truth[4]
+        bpy.ops.render.render(write_still=True)
+    finally:
+        for o, m in relit.items():
+            bpy.data.objects[o].material_slots[0].material = m
+    times["frame 4: EEVEE and Cycles truth"] = time.perf_counter() - t0
+
+    # 6. Pictures and numbers.
     img = {f"relit{f}": _read_png(bpy, p) for f, p in frames.items()}
     img.update({f"truth{f}": _read_png(bpy, p) for f, p in truth.items()})
     diffs = {}
-    for f in (1, 3):
+    for f in (1, 3, 4):
         a, b = img[f"relit{f}"], img[f"truth{f}"]
         la, lb = srgb_to_linear(a), srgb_to_linear(b)
         diffs[f] = dict(srgb255=float(np.abs(a - b).mean() * 255),
@@ -275,15 +325,18 @@ def main(argv=None):
             "removed per texel, M_k lamp k's share of the light.")
     side = os.path.join(out, "demo_side_by_side.png")
     pa, pb = powers0["Lamp A"], powers0["Lamp B"]
-    side_by_side([img["relit1"], img["relit3"], img["truth3"]],
+    side_by_side([img["relit1"], img["relit3"], img["relit4"], img["truth4"]],
                  [f"original photo (A {pa:g} W, B {pb:g} W)",
                   f"relit, EEVEE (A off, B {2 * pb:g} W)",
-                  f"Cycles truth (A off, B {2 * pb:g} W)"], note, side)
+                  f"relit, EEVEE: A off, a virtual lamp ({VIRTUAL_W:g} W) and box",
+                  "Cycles truth of the virtual lamp and box"], note, side)
     diff_png = os.path.join(out, "demo_diff.png")
     side_by_side([np.clip(4 * np.abs(img["relit1"] - img["truth1"]), 0, 1),
-                  np.clip(4 * np.abs(img["relit3"] - img["truth3"]), 0, 1)],
+                  np.clip(4 * np.abs(img["relit3"] - img["truth3"]), 0, 1),
+                  np.clip(4 * np.abs(img["relit4"] - img["truth4"]), 0, 1)],
                  ["|relit - truth| x 4, frame 1 (original lighting)",
-                  "|relit - truth| x 4, frame 3 (A off, B doubled)"],
+                  "|relit - truth| x 4, frame 3 (A off, B doubled)",
+                  "|relit - truth| x 4, frame 4 (virtual lamp and box)"],
                  "sRGB-encoded difference; frame 1 = floor (48^2-texel photo vs per-pixel render, noise).", diff_png)
     if args.results:
         import shutil
@@ -305,7 +358,8 @@ def main(argv=None):
     for k, v in times.items():
         print(f"  {k:45s} {v:7.1f} s")
     print("  keyframes (energy): frame 1 A=P B=P | frame 2 A=0 B=P | frame 3 A=0 B=2P")
-    for f in (1, 3):
+    print("  frame 4: A=0 B=P, a virtual lamp and a virtual box (Update, no new solve)")
+    for f in (1, 3, 4):
         print(f"  frame {f}: relit (EEVEE) vs Cycles truth: mean |diff| {diffs[f]['srgb255']:.1f}"
               f"/255 (sRGB), {100 * diffs[f]['linear_rel']:.1f} % of the mean (linear)")
     print("  Frame 1 is the floor: the photo is a 48^2-texel Cycles bake (Closest filtering, texel "

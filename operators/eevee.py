@@ -36,6 +36,10 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
         default=0.25, min=0.05, soft_max=2.0, unit='LENGTH')
     bake: bpy.props.BoolProperty(
         name="Bake", description="Bake the volume now (Blender's light-probe bake)", default=True)
+    samples: bpy.props.IntProperty(
+        name="Samples", default=256, min=1, soft_max=2048,
+        description="Rays per volume sample when baking: the bake's time grows with it "
+                    "(Blender's default of 2048 took minutes headless, on a software GPU)")
 
     @classmethod
     def disabled_reason(cls, context):
@@ -61,6 +65,7 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
             return {'CANCELLED'}
         rx, ry, rz = eevee_probe.resolution(probe.data)
         count = rx * ry * rz
+        probe.data.bake_samples = self.samples
         if not self.bake:
             # the driver refers the intensity to the lamps as they are now (BAKED_KEY)
             self.report({'INFO'}, f"Relight: irradiance volume placed ({count} samples); bake "
@@ -68,12 +73,22 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
                                   "from their present powers)")
             return {'FINISHED'}
         # Blender's own bake: a job with progress and cancel in the UI, blocking in background
+        import time
         how = 'EXEC_DEFAULT' if bpy.app.background else 'INVOKE_DEFAULT'
-        with context.temp_override(active_object=probe, object=probe,
-                                   selected_objects=[probe]):
-            bpy.ops.object.lightprobe_cache_bake(how, subset='ACTIVE')
+        t0 = time.perf_counter()
+        try:
+            with context.temp_override(active_object=probe, object=probe,
+                                       selected_objects=[probe]):
+                bpy.ops.object.lightprobe_cache_bake(how, subset='ACTIVE')
+        except RuntimeError as ex:              # no GPU context (a farm node, a server)
+            self.report({'ERROR'}, f"Relight: the irradiance volume is placed but could not be "
+                                   f"baked here ({str(ex).strip()}): bake it in Blender with a "
+                                   "window (Bake in the volume's properties)")
+            return {'CANCELLED'}
         self.report({'INFO'}, f"Relight: irradiance volume of {count} samples "
-                              + ("baked" if bpy.app.background else "baking"))
+                              + (f"baked ({self.samples} rays each, "
+                                 f"{time.perf_counter() - t0:.0f} s)" if bpy.app.background
+                                 else "baking"))
         return {'FINISHED'}
 
 

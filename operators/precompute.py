@@ -11,7 +11,6 @@ pipeline (relight_addon/blender/pipeline.py), which reads, decides, computes and
 """
 
 import threading
-import time
 
 import bpy
 from bpy.props import EnumProperty
@@ -63,14 +62,14 @@ class SolveJob:
         return not self._thread.is_alive()
 
     def _progress(self, fraction, message):
-        from ..relight_addon.core.radiosity.precompute import Cancelled
+        from ..relight_addon.core.progress import Cancelled
         if self._cancel.is_set():
             raise Cancelled("cancelled by the user")
         self.fraction = max(self.fraction, float(fraction))
         self.message = str(message)
 
     def _run(self):
-        from ..relight_addon.core.radiosity.precompute import Cancelled
+        from ..relight_addon.core.progress import Cancelled
         try:
             self.result = self.job.compute(progress=self._progress)
             self.state = "cancelled" if self._cancel.is_set() else "done"

@@ -79,11 +79,11 @@ def test_faces_looked_at_in_chunks_decide_as_at_once(monkeypatch):
     occ = make_occluder(sc.occluder_triangles())
     whole = orient(sc, occ)
     faces = np.flatnonzero(sc.lamp < 0)
-    lit, camera, _ = orient_module.side_evidence(sc, occ, faces)
+    lit, camera, _, _ = orient_module.side_evidence(sc, occ, faces)
     monkeypatch.setattr(orient_module, "CHUNK", 7)
     chunked = orient(sc, occ)
     assert np.array_equal(chunked.flipped, whole.flipped)
     assert chunked.back_of.tolist() == whole.back_of.tolist() == [24]
-    lit7, camera7, _ = orient_module.side_evidence(sc, occ, faces)
+    lit7, camera7, _, _ = orient_module.side_evidence(sc, occ, faces)
     assert np.array_equal(camera7, camera)
     np.testing.assert_allclose(lit7, lit, rtol=0.25, atol=1e-3 * lit.max())

@@ -467,12 +467,15 @@ def test_status_for_the_panel(fresh):
     assert abs(sum(st["relative_exitance"]) / len(LAMPS) - 1) < 1e-9
     panel = importlib.import_module(PKG + ".panels.main")
     lines = [t for t, _ in panel.status_lines(bpy.context.scene)]
-    assert any("elements" in t for t in lines)
-    assert sum(t.startswith(("LampA", "LampB")) for t in lines) == 2
-    assert any("now at 1.00x" in t for t in lines), lines
+    assert any("elements" in t for t in lines) and any(t.startswith("Solved in") for t in lines)
+    lamps = panel.lamp_lines(bpy.context.scene)
+    assert [h.split(":")[0] for h, _, _ in lamps] == ["LampA", "LampB"]
+    assert all("now at 1.00x" in h for h, _, _ in lamps), lamps
     # each lamp: the photo's view against its set power, with an uncertainty, and what is used
-    assert all(("photo says" in t or "cannot tell" in t) and "used" in t
-               for t in lines if t.startswith("Lamp")), lines
+    assert all(("photo says" in v or "cannot tell" in v) and "used" in v
+               for _, v, _ in lamps), lamps
+    # short enough for a sidebar (the warnings are wrapped to its width)
+    assert all(len(t) <= 60 for t in lines) and all(len(h) <= 60 for h, _, _ in lamps)
     assert len(st["photo_ratio"]) == len(st["photo_sigma"]) == len(LAMPS)
 
 

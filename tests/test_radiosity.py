@@ -502,7 +502,8 @@ def test_a_solve_without_convergent_physics_stops_at_its_bound_and_says_so():
           f"{time.perf_counter() - t0:.2f} s")
     assert not info.converged and info.iterations <= 60 * GMRES_RESTARTS
     sol.info = info
-    words = diagnose(SimpleNamespace(solution=sol, maps={}, lamps=SimpleNamespace(
+    words = diagnose(SimpleNamespace(solution=sol, maps={}, scene=None, occluder=None,
+                                     lamps=SimpleNamespace(
         photo_ratio=np.full(1, np.nan), uncertainty=np.full(1, np.nan))),
         np.ones(sol.scene.n_patches, bool))
     assert any("without converging" in w for w in words), words

@@ -25,6 +25,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 from test_virtual_lamps import (SAMPLES, SIZE, VIRTUAL, _add_point, _de, _relit,  # noqa: E402
                                 photographed_office)
+from test_virtual_lamps import relit_colour  # noqa: E402
 from test_virtual_objects import _grey_box  # noqa: E402
 
 BOX_AT = (3.6, 1.0, 0.3)
@@ -70,6 +71,16 @@ def _light(name):
     """The light data of the light object ``name`` (light data names drift: a removed object's
     data stays behind under the name)."""
     return bpy.data.objects[name].data
+
+
+def _renders_as_the_formula():
+    """A render of the floor's relit material (a Cycles EMIT bake: its nodes and drivers as a
+    render evaluates them) against T x sum_k I_k M_k from its images and drivers' values."""
+    from scenes.bake import emit_bake
+    bpy.context.view_layer.update()
+    bake = emit_bake(bpy, ["Floor"])["Floor"]
+    formula = relit_colour("Floor")
+    assert np.abs(bake - formula).max() <= 1e-3 * formula.max()
 
 
 def _driver(name):
@@ -145,6 +156,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     assert _driver("Lamp A") == pytest.approx(0.25)
     dimmed = _mix(info, truth, {"Lamp A": 0.25, "Lamp B": 1.0})
     assert _de(info, _relit(info), dimmed) <= 1.5
+    _renders_as_the_formula()
 
     # 2. a virtual lamp: its map on the kept room; the dimmed lamp keeps its photo power
     _add_point("Virtual", VIRTUAL, 150.0)
@@ -154,6 +166,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     assert _light("Lamp A")["relight_power0"] == pytest.approx(power["Lamp A"])
     with_v = _mix(info, truth, {"Lamp A": 0.25, "Lamp B": 1.0, "Virtual": 1.0})
     assert _de(info, _relit(info), with_v) <= 1.5
+    _renders_as_the_formula()
 
     # 3. lights out, the virtual lamp alone: Update is no refusal
     for k in power:
@@ -162,6 +175,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert len(solves) == 1
     assert _de(info, _relit(info), truth["Virtual"]) <= 2.0
+    _renders_as_the_formula()
 
     # 4. a virtual object beside the virtual lamp (both orders failed once: issue 42, 1.)
     box = _grey_box(BOX_AT)
@@ -174,6 +188,7 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     _light("Virtual").energy = 0.0
     bpy.context.view_layer.update()
     assert _de(info, _relit(info), truth["box"]) <= 1.5
+    _renders_as_the_formula()
 
     # 5. save (photos packed), reopen in a fresh process, go on there
     _light("Lamp A").energy = power["Lamp A"] / 4
@@ -229,3 +244,4 @@ def test_an_evening_with_a_relit_file(office, tmp_path, monkeypatch):
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert len(solves) == 1
     assert _photo_error(info, photo) < 2e-3
+    _renders_as_the_formula()

@@ -84,8 +84,8 @@ def test_a_deleted_photographed_lamp_is_a_lamp_switched_off(room):
     st = _status()
     assert list(st["gone"]) == ["LampA"]
     assert any("LampA" in w and "deleted" in w for w in st["warnings"])
-    lines = _module("panels.main").status_lines(bpy.context.scene)
-    assert any("LampA" in text and "deleted" in text for text, _ in lines)
+    lines = _module("panels.main").lamp_lines(bpy.context.scene)
+    assert any("LampA" in head and "deleted" in head for head, _, _ in lines)
     nt = bpy.data.objects["Floor"].material_slots[0].material.node_tree
     assert nt.nodes["I LampA"].outputs[0].default_value == 0.0
     b_only = _pixels(nt.nodes["T"].image)[..., :3] * _pixels(nt.nodes["M LampB"].image)[..., :3]
@@ -221,3 +221,59 @@ def test_the_preference_leaves_the_solution_out_of_the_file(room, tmp_path):
     kept_mb = bpy.context.scene["relight_status"]["kept_mb"]
     assert kept_mb > 0
     assert abs((sizes[True] - sizes[False]) / 2**20 - kept_mb) < 0.05 * kept_mb + 0.05
+
+
+class _Layout:
+    """Records what a panel's draw() puts in the sidebar (background mode has no UI)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.scale_y = 1.0
+        self.enabled = True
+
+    def label(self, text="", icon='NONE'):
+        self.log.append(("label", text))
+
+    def prop(self, data, name, text=None, **_):
+        assert hasattr(data, name), name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, text=None, icon='NONE', **_):
+        module, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, module), name), idname
+        self.log.append(("operator", idname))
+        return type("Props", (), {})()
+
+    def column(self, **_):
+        return self
+
+    row = box = column
+
+
+def test_the_panels_draw_at_every_stage(room, tmp_path):
+    """Each sub-panel draws (no exception, only existing operators and properties) before a
+    precompute, after it, with a virtual object selected and after a lamp was deleted; no line
+    is longer than a sidebar holds."""
+    from types import SimpleNamespace
+    panels = _module("panels.main")
+
+    def draw_all():
+        log = []
+        ctx = SimpleNamespace(scene=bpy.context.scene, active_object=bpy.data.objects["Box"],
+                              region=None, preferences=bpy.context.preferences)
+        for cls in panels.classes:
+            panel = SimpleNamespace(layout=_Layout(log))
+            if hasattr(cls, "draw_header"):
+                cls.draw_header(panel, ctx)
+            cls.draw(panel, ctx)
+        return log
+    log = draw_all()
+    assert ("operator", "relight.precompute") in log
+    assert all(len(t) <= 70 for kind, t in log if kind == "label"), log
+    bpy.data.objects["Box"].relight_role = "virtual"
+    bpy.data.objects.remove(bpy.data.objects["LampB"])
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    log = draw_all()
+    assert any("deleted" in t for kind, t in log if kind == "label")
+    assert ("prop", "relight_shadows") in log
+    assert all(len(t) <= 70 for kind, t in log if kind == "label"), log

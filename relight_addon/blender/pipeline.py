@@ -61,7 +61,8 @@ def user_message(ex) -> str:
 
 
 def solve(data, preset, correction="TEXEL", progress=None, reuse=None, proxy_faces=0):
-    """The bpy-free precompute: shadow-free textures and per-lamp display maps."""
+    """The bpy-free precompute: shadow-free textures and per-lamp display maps (``progress``:
+    a callback, or the reporter of core.progress already running)."""
     from ..core.relight.shadowfree import ShadowFreeOptions, shadow_free
     options = ShadowFreeOptions(mode=correction.lower(), preset=preset,
                                 proxy_faces=int(proxy_faces))
@@ -94,6 +95,7 @@ class Job:
     reuse: object = None             # the solution whose mesh and links a "reuse" keeps
     drop: list = field(default_factory=list)    # virtual lamp labels whose maps are made again
     add: list = field(default_factory=list)     # virtual lamp labels whose maps are made
+    note: str = ""                   # why the room is solved again when it might not have been
     t0: float = field(default_factory=time.perf_counter)
 
     @property
@@ -101,30 +103,35 @@ class Job:
         return self.action in ("solve", "reuse")
 
     def compute(self, progress=None):
-        """The result to write (bpy-free, any thread), or None when nothing is computed."""
-        if self.action == "solve":
-            return solve(self.data, self.preset, self.correction, progress,
-                         proxy_faces=self.proxy_faces)
-        if self.action == "reuse":
-            return solve(self.data, self.preset, self.correction, progress, reuse=self.reuse,
-                         proxy_faces=self.proxy_faces)
-        if self.action == "quick":
-            return _quick(self, progress)
-        if self.action == "rewrite":
-            return self.base
-        return None
+        """The result to write (bpy-free, any thread), or None when nothing is computed.
+        ``progress(fraction, message)`` hears from every stage and from inner loops at least
+        every core.progress.TICK seconds, and may raise core.progress.Cancelled to stop."""
+        from ..core.progress import reporting
+        with reporting(progress):
+            if self.action == "solve":
+                return solve(self.data, self.preset, self.correction,
+                             proxy_faces=self.proxy_faces)
+            if self.action == "reuse":
+                return solve(self.data, self.preset, self.correction, reuse=self.reuse,
+                             proxy_faces=self.proxy_faces)
+            if self.action == "quick":
+                return _quick(self)
+            if self.action == "rewrite":
+                return self.base
+            return None
 
 
-def _quick(job, progress=None):
+def _quick(job):
     """The kept room with its virtual lamps' maps made again where they changed, then the
     virtual objects' change added (core/relight/virtual.py): no new solve."""
+    from ..core.progress import report
     from ..core.relight.virtual import add_lamps, add_objects, keep_lamps
     base = job.base
     names = list(base.solution.scene.lamp_names)
     result = keep_lamps(base, [names.index(n) for n in job.drop if n in names])
+    objects = bool(job.data.virtual.any())
     if job.add:
-        if progress is not None:
-            progress(0.1, "Lighting the scene with the new lamps")
+        report(0.0, "Lighting the room with the virtual lamps", 0.5 if objects else 1.0)
         data = job.data
         lights = data.lights
         ks = [data.lamp_names.index(n) for n in job.add]
@@ -134,9 +141,8 @@ def _quick(job, progress=None):
                                              for f in dataclasses.fields(lights)})
         sub.lamp = np.array([order[int(k)] for k in sub.lamp], np.int32)
         result = add_lamps(result, sub, list(job.add))
-    if job.data.virtual.any():
-        if progress is not None:
-            progress(0.5, "Casting the virtual objects' shadows")
+    if objects:
+        report(0.5 if job.add else 0.0, "Casting the virtual objects' shadows", 1.0)
         result = add_objects(result, job.data)
     elif result.room is not None:
         result = dataclasses.replace(result, room=None)
@@ -155,7 +161,9 @@ def _check_read(data, report):
         why = (uv + images)[:2]
         raise PipelineError("No face uses an image texture: nothing to relight"
                             + (f" ({'; '.join(why)})" if why else "")
-                            + (": Unwrap Missing UVs gives the meshes a UV map" if uv else ""))
+                            + (": the photo textures need the UV maps they were made with "
+                               "(import the model with its UVs; Unwrap Missing UVs makes new ones, "
+                               "for photos projected on the model afterwards)" if uv else ""))
     textured = {report.sources.get(report.groups[int(g)][0], report.groups[int(g)][0])
                 for g in set(data.group[data.image >= 0].tolist())}
     objs = [bpy.data.objects.get(n) for n in textured]
@@ -244,7 +252,10 @@ def _decide(scene, job, st):
     new = job.parts
     if not old or st.get("preset") != job.preset or st.get("correction") != job.correction:
         return
-    kept = state.last_result(scene)
+    # (the kept solution is read only where a path starts from it: after reopening, an Update
+    # that changes nothing reads nothing)
+    def kept():
+        return state.last_result(scene)
     virtual = {r["label"] for r in job.records if r.get("virtual")}
     real = {r["label"] for r in job.records if not r.get("virtual")}
     present = set(new["lamps"])
@@ -253,9 +264,10 @@ def _decide(scene, job, st):
     if new["geometry"] != old.get("geometry") or moved_real:
         return                                          # a new solve
     if new["surfaces"] != old.get("surfaces"):
-        if kept is not None and kept.options.mode != "element" and \
-                kept.options.proxy_faces == job.proxy_faces and not set(real) - present:
-            job.action, job.reuse = "reuse", kept.solution
+        result = kept()
+        if result is not None and result.options.mode != "element" and \
+                result.options.proxy_faces == job.proxy_faces and not set(real) - present:
+            job.action, job.reuse = "reuse", result.solution
         return
     new_virtual = {n for n in present if n not in real}
     changed = {n for n in new_virtual if new["lamps"][n] != old_lamps.get(n)}
@@ -267,18 +279,24 @@ def _decide(scene, job, st):
         return
     gone = sorted(real - present)
     if changed or removed or objects:
-        room = None if kept is None else (kept.room if kept.room is not None else
-                                          (None if st.get("objects") else kept))
+        result = kept()
+        room = None if result is None else (result.room if result.room is not None else
+                                            (None if st.get("objects") else result))
         if room is None or room.denominator is None:
-            return                                      # nothing kept to start from: solve
+            # nothing kept to start from: solve, and say why
+            job.note = state.kept_problem(scene) or (
+                "no solution of the last run is kept (the file was saved without it: add-on "
+                "preferences)" if result is None else "")
+            return
         job.action, job.base = "quick", room
         job.drop = sorted((changed | removed) & virtual)
         job.add = sorted(changed)
         return
     if gone != sorted(st.get("gone", ())) or not write.has_relight_data(scene):
-        if kept is None:
+        result = kept()
+        if result is None:
             return
-        job.action, job.base = "rewrite", kept
+        job.action, job.base = "rewrite", result
         return
     job.action = "reapply" if st.get("restored") or not materials.relit_slot_count(scene) \
         else "none"
@@ -315,6 +333,8 @@ def _records(scene, job, result):
                       "p0": float(src.get("power_ref", 1.0)),
                       "photo": float(src.get("power_photo", 0.0)),
                       "color0": list(src.get("color0", (1.0, 1.0, 1.0)))}
+            record.update(exposure=float(src.get("exposure", 0.0)),
+                          temperature=float(src.get("temperature", 0.0)))
             if src.get("kind") == "emissive":
                 # (node, input, strength then): ID properties hold no mixed lists
                 node, socket, s0 = (list(src.get("strength", ())) + [None] * 3)[:3]
@@ -328,6 +348,10 @@ def _records(scene, job, result):
                 # a duplicate (Shift D) carries its original's identity: it gets its own
                 record["uid"] = ids.give_uid(obj, fresh=bool(holders) or ids.uid(obj) in
                                              {r.get("uid") for r in job.records})
+        elif src is not None and job.solves:
+            # a new solve reads the light's exposure and temperature as they are now
+            record.update(exposure=float(src.get("exposure", 0.0)),
+                          temperature=float(src.get("temperature", 0.0)))
         obj = state.find_light(scene, record) if record.get("uid") else None
         if obj is not None:
             record["object"] = obj.name
@@ -354,7 +378,17 @@ def _lamp_terms(scene, records, warnings):
         if obj is None:
             what = "of the photo" if not r.get("virtual") else "(virtual)"
             warnings.append(f"Lamp '{r['label']}' {what} was deleted: it is off (undo the "
-                            "deletion, or add a light, to light the room again)")
+                            "deletion to have it back; a new light is a virtual lamp)")
+        elif obj is not None:
+            changed = [what for what, now, then in (
+                ("Exposure", float(getattr(obj.data, "exposure", 0.0)), r.get("exposure")),
+                ("Temperature", float(getattr(obj.data, "temperature", 0.0))
+                 if getattr(obj.data, "use_temperature", False) else 0.0, r.get("temperature")))
+                if then is not None and abs(now - float(then)) > 1e-6]
+            if changed:
+                warnings.append(f"Lamp '{r['label']}': its {' and '.join(changed)} changed since "
+                                "its map was made; the relit surfaces follow its Power and Color "
+                                "only (Precompute again to take the change)")
         terms.append(write.LampTerm(r["label"], obj, float(r["p0"]),
                                     tuple(r.get("color0") or (1.0, 1.0, 1.0)), gone=obj is None))
     return terms
@@ -370,7 +404,9 @@ def finish(context, job, result) -> Outcome:
         shown = materials.reapply(scene) if job.action == "reapply" else 0
         if shown:
             state.update_status(scene, restored=False)
-        moving = sync_spheres(context, report, state.last_result(scene))
+        from .roles import moving_objects
+        moving = sync_spheres(context, report, state.last_result(
+            scene, load=bool(moving_objects(scene))))       # (settling traces with it)
         warnings = list(report.warnings)
         if shown:
             message = f"Relight: {shown} material slot(s) show the relit materials again"
@@ -397,6 +433,10 @@ def finish(context, job, result) -> Outcome:
         for sentence in diagnose(result, result.photographed,
                                  _group_names(job.data, report, result)):
             report.warn(sentence)
+    view = scene.view_settings.view_transform
+    if view not in ("Standard", "Raw"):
+        report.warn(f"The view transform is '{view}': the relit surfaces show the photo's "
+                    "colours with 'Standard' (Render Properties > Color Management)")
     warnings = list(report.warnings)
     objects = bool(job.data.virtual.any())
     run = state.remember(scene, result)
@@ -411,6 +451,9 @@ def finish(context, job, result) -> Outcome:
     state.update_status(scene, gone=[r["label"] for r in records if r.get("gone")])
     done = (f"Relight: {summary['materials']} material(s), {summary['images']} image(s), "
             f"{summary['lamps']} lamp(s)")
+    if job.note:
+        done += f" (solved again: {job.note})"
+
     if moving["objects"]:
         done += f", {moving['objects']} moving object(s)"
     return Outcome(done, warnings, job.action, summary)

@@ -63,7 +63,7 @@ from ..core.scene import RHO_MAX, ImageTexels, SceneData
 from ..core.texture.colour import srgb_to_linear
 from . import ids
 from .materials import original_material
-from .roles import ROLES, has_role, moving, object_role  # noqa: F401  (ROLES: the readers' API)
+from .roles import has_role, moving, object_role
 
 # Material.use_nodes is deprecated (always on) from Blender 5.0.
 _LEGACY_USE_NODES = bpy.app.version < (5, 0, 0)
@@ -590,164 +590,137 @@ def _check_powers(report):
                     "the photo (0 if it was off)")
 
 
-def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=None):
-    """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene.
+class _Reader:
+    """What read_scene gathers, object by object, before it becomes a SceneData."""
 
-    ``virtual``: names of lights that are not in the photo (virtual lamps, added after the
-    precompute): they are read off in the photo (intensity 0) at their current power, and an
-    area light among them as a core Light rather than patches (so that it can be added to a
-    finished solution without new links).
+    def __init__(self, scene, report, virtual, lamps):
+        self.report = report
+        self.virtual, self.lamps = virtual, lamps
+        self.images: dict = {}       # image name -> ImageTexels | None
+        self.mat_cache: dict = {}
+        self.corners, self.rho, self.emission, self.lamp = [], [], [], []
+        self.occluder, self.group, self.uvs, self.image_idx = [], [], [], []
+        self.lamp_names: list = []
+        self.lamp_intensity: list = []   # per lamp: its power in the photo over the power read
+        self.light_rows: list = []       # core Lights of the lamps that are not patches
+        self.virtual_patch: list = []    # per patch: part of a virtual object (role "virtual")
+        self.emissive_lamp: dict = {}    # (object, material) -> lamp index
+        self.claims = _claim_lamps(scene, lamps)
+        self.taken_labels = {r["label"] for r in (lamps or ())}
 
-    ``lamps``: the lamp records of the scene's last precompute (state.py), or None before the
-    first.  A light carrying a record's identity is read as that record says: under its label
-    (a rename changes nothing), in the photo or not, at the power and colour its map was
-    computed at (the light's present power and colour are the drivers' business); a light
-    without one is new since, so virtual.  Of two lights with one identity (a duplicate), the
-    one named as the record is the lamp, the other is new."""
-    if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
-        scene = context_or_scene.scene
-        if depsgraph is None:
-            depsgraph = context_or_scene.evaluated_depsgraph_get()
-    else:
-        scene = context_or_scene
-        view_layer = scene.view_layers[0] if depsgraph is None else depsgraph.view_layer
-        if depsgraph is None:
-            depsgraph = view_layer.depsgraph
-    report = ReadReport()
-    images: dict = {}            # image name -> ImageTexels | None
-    mat_cache: dict = {}
-    corners, rho, emission, lamp, occluder, group, uvs, image_idx = ([] for _ in range(8))
-    lamp_names: list = []
-    lamp_intensity: list = []    # per lamp: its power in the photo over the power it is read at
-    light_rows: list = []        # core Lights of the lamps that are not patches
-    virtual_patch: list = []     # per patch: part of a virtual object (role "virtual")
-    emissive_lamp: dict = {}     # (object, material) -> lamp index
+    def light(self, obj, ev, label, matrix, parent):
+        """One light: as patches (an area light of 180 degrees' spread) or a core Light."""
+        corners, rho, emission, lamp, occluder, group, uvs, image_idx = (
+            self.corners, self.rho, self.emission, self.lamp, self.occluder, self.group,
+            self.uvs, self.image_idx)
+        lamp_names, lamp_intensity, light_rows = self.lamp_names, self.lamp_intensity, \
+            self.light_rows
+        virtual_patch, report = self.virtual_patch, self.report
+        claims, taken_labels, virtual, lamps = self.claims, self.taken_labels, \
+            self.virtual, self.lamps
+        light = ev.data
+        if light.type not in LIGHT_TYPES or (light.type == "AREA" and
+                                             light.shape not in AREA_SHAPES):
+            report.warn(f"Light '{label}' ({light.type.lower()}) is not supported and is "
+                        "ignored")
+            return
+        if getattr(light, "use_nodes", False) and light.node_tree is not None:
+            report.warn(f"Light '{label}': light nodes are ignored")
+        # A lamp that is off in the photo still gets its basis (light transport is linear),
+        # computed at a reference power; the photo sees it at intensity 0.
+        record = claims.get(obj.name) if parent is None else None
+        power = float(light.energy)
+        if not np.isfinite(power) or power < 0 or power >= MAX_VALUE:
+            report.errors.append(f"Light '{label}' has power {power:g}: set a finite power, "
+                                 "0 or more")
+            return
+        power_ref = power if power > 0 else reference_power(light)
+        if record is not None:
+            light = _AsRecorded(light, record.get("color0") or light.color)
+            power_ref = float(record["p0"])
+            power = float(record.get("photo", power_ref))
+            label = record["label"]
+        elif lamps is not None:
+            label = _unique(label, taken_labels)
+        taken_labels.add(label)
+        if not np.any(light_colour(light) > 0):
+            report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
+            return
+        is_virtual = bool(record.get("virtual")) if record is not None else \
+            (label in virtual or obj.name in virtual or lamps is not None)
+        patches = light.type == "AREA" and not is_virtual and \
+            float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
+        if patches:
+            local = _area_light_polygon(light)
+            if np.linalg.det(matrix[:3, :3]) < 0:
+                local = local[:, ::-1]
+            quads = _transform(matrix, local.reshape(-1, 3)).reshape(-1, 4, 3)
+            cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
+            area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
+            if not area > 0:
+                report.warn(f"Light '{label}' has zero area and is ignored")
+                return
+        if record is None and is_virtual and power <= 0:
+            report.warn(f"Virtual lamp '{label}' has no power: it is ignored")
+            return
+        if record is None and power <= 0:
+            unit = "W/m^2" if light.type == "SUN" else "W"
+            report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
+                        f"its map is computed at {power_ref:g} {unit}, so raising its power "
+                        "switches it on")
+        k = len(lamp_names)
+        lamp_names.append(label)
+        lamp_intensity.append(0.0 if is_virtual else max(power, 0.0) / power_ref)
+        report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
+                                    "type": light.type, "virtual": is_virtual,
+                                    "power_photo": 0.0 if is_virtual else power,
+                                    "power_ref": power_ref,
+                                    "uid": None if record is None else record["uid"],
+                                    "color0": [float(c) for c in light.color],
+                                    "exposure": float(getattr(light, "exposure", 0.0)),
+                                    "temperature": float(light.temperature) if getattr(
+                                        light, "use_temperature", False) else 0.0})
+        report.lamps += 1
+        if not patches:
+            light_rows.append(_analytic_light(light, matrix, k, power_ref))
+            return
+        exitance = area_light_exitance(light, area, power_ref)
+        q = len(quads)
+        corners.append(quads)
+        virtual_patch.append(np.zeros(q, bool))
+        rho.append(np.zeros((q, 3)))
+        emission.append(np.tile(exitance, (q, 1)))
+        lamp.append(np.full(q, k))
+        occluder.append(np.zeros(q, bool))
+        group.append(np.full(q, len(report.groups)))
+        report.groups.append((label, ""))
+        uvs.append(np.zeros((q, 4, 2)))
+        image_idx.append(np.full(q, -1))
+        report.lamp_patches += q
+        return
 
-    labels_seen: dict = {}
-    claims = _claim_lamps(scene, lamps)
-    taken_labels = {r["label"] for r in (lamps or ())}
-    # depsgraph.object_instances: every evaluated object of the view layer plus the instances
-    # (collection instances, geometry-nodes and particle instances) with their world matrices.
-    for inst in _ordered_instances(depsgraph):
-        ev = inst.object
-        obj = ev.original
-        if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
-            continue
-        parent = inst.parent.original if inst.is_instance and inst.parent is not None else None
-        if parent is not None and parent == obj and obj.type != "MESH":
-            # a curve's or text's own geometry, also listed as an instance of itself (it is
-            # read once, as the object; a mesh's geometry-nodes instances are its own)
-            continue
-        label = obj.name if parent is None else f"{parent.name}/{obj.name}"
-        if label in labels_seen:
-            labels_seen[label] += 1
-            label = f"{label}.{labels_seen[label]}"
-        else:
-            labels_seen[label] = 0
-        role_of = parent if parent is not None and has_role(parent, roles) else obj
-        role = object_role(role_of, roles)
-        if role is None:
-            report.warn(f"Object '{role_of.name}': unknown {ids.ROLE} "
-                        f"'{role_of.get(ids.ROLE)}', read as relit")
-            role = "relit"
-        if role == "virtual" and moving(role_of):     # sphere shadows at render time
-            report.moving_objects.append(label)
-            continue
-        if obj.hide_render or (parent is not None and parent.hide_render) or role == "ignored":
-            report.ignored_objects.append(label)
-            continue
-        matrix = np.array(inst.matrix_world, dtype=np.float64)
-        if obj.type == "LIGHT":
-            light = ev.data
-            if light.type not in LIGHT_TYPES or (light.type == "AREA" and
-                                                 light.shape not in AREA_SHAPES):
-                report.warn(f"Light '{label}' ({light.type.lower()}) is not supported and is "
-                            "ignored")
-                continue
-            if getattr(light, "use_nodes", False) and light.node_tree is not None:
-                report.warn(f"Light '{label}': light nodes are ignored")
-            # A lamp that is off in the photo still gets its basis (light transport is linear),
-            # computed at a reference power; the photo sees it at intensity 0.
-            record = claims.get(obj.name) if parent is None else None
-            power = float(light.energy)
-            if not np.isfinite(power) or power < 0 or power >= MAX_VALUE:
-                report.errors.append(f"Light '{label}' has power {power:g}: set a finite power, "
-                                     "0 or more")
-                continue
-            power_ref = power if power > 0 else reference_power(light)
-            if record is not None:
-                light = _AsRecorded(light, record.get("color0") or light.color)
-                power_ref = float(record["p0"])
-                power = float(record.get("photo", power_ref))
-                label = record["label"]
-            elif lamps is not None:
-                label = _unique(label, taken_labels)
-            taken_labels.add(label)
-            if not np.any(light_colour(light) > 0):
-                report.warn(f"Light '{label}' is black (colour or exposure): it is ignored")
-                continue
-            is_virtual = bool(record.get("virtual")) if record is not None else \
-                (label in virtual or obj.name in virtual or lamps is not None)
-            patches = light.type == "AREA" and not is_virtual and \
-                float(getattr(light, "spread", np.pi)) >= np.pi - 1e-6
-            if patches:
-                local = _area_light_polygon(light)
-                if np.linalg.det(matrix[:3, :3]) < 0:
-                    local = local[:, ::-1]
-                quads = _transform(matrix, local.reshape(-1, 3)).reshape(-1, 4, 3)
-                cross = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
-                area = 0.5 * float(np.linalg.norm(cross, axis=-1).sum())
-                if not area > 0:
-                    report.warn(f"Light '{label}' has zero area and is ignored")
-                    continue
-            if record is None and is_virtual and power <= 0:
-                report.warn(f"Virtual lamp '{label}' has no power: it is ignored")
-                continue
-            if record is None and power <= 0:
-                unit = "W/m^2" if light.type == "SUN" else "W"
-                report.warn(f"Light '{label}' is off (power 0): it is taken as off in the photo; "
-                            f"its map is computed at {power_ref:g} {unit}, so raising its power "
-                            "switches it on")
-            k = len(lamp_names)
-            lamp_names.append(label)
-            lamp_intensity.append(0.0 if is_virtual else max(power, 0.0) / power_ref)
-            report.lamp_sources.append({"name": label, "object": obj.name, "kind": "light",
-                                        "type": light.type, "virtual": is_virtual,
-                                        "power_photo": 0.0 if is_virtual else power,
-                                        "power_ref": power_ref,
-                                        "uid": None if record is None else record["uid"],
-                                        "color0": [float(c) for c in light.color]})
-            report.lamps += 1
-            if not patches:
-                light_rows.append(_analytic_light(light, matrix, k, power_ref))
-                continue
-            exitance = area_light_exitance(light, area, power_ref)
-            q = len(quads)
-            corners.append(quads)
-            virtual_patch.append(np.zeros(q, bool))
-            rho.append(np.zeros((q, 3)))
-            emission.append(np.tile(exitance, (q, 1)))
-            lamp.append(np.full(q, k))
-            occluder.append(np.zeros(q, bool))
-            group.append(np.full(q, len(report.groups)))
-            report.groups.append((label, ""))
-            uvs.append(np.zeros((q, 4, 2)))
-            image_idx.append(np.full(q, -1))
-            report.lamp_patches += q
-            continue
 
-        # -- geometry --
+    def mesh(self, obj, ev, label, matrix, parent, role):
+        """One evaluated mesh-like object: its faces, materials, UVs, images and emissive
+        faces (lamps)."""
+        corners, rho, emission, lamp, occluder, group, uvs, image_idx = (
+            self.corners, self.rho, self.emission, self.lamp, self.occluder, self.group,
+            self.uvs, self.image_idx)
+        lamp_names, lamp_intensity = self.lamp_names, self.lamp_intensity
+        virtual_patch, emissive_lamp, report = self.virtual_patch, self.emissive_lamp, \
+            self.report
+        images, mat_cache = self.images, self.mat_cache
         try:
             me = ev.to_mesh()
         except RuntimeError:
             me = None
         if me is None:
-            continue
+            return
         try:
             n_v = len(me.vertices)
             n_loops = len(me.loops)
             if n_v == 0 or len(me.polygons) == 0:
-                continue
+                return
             report.objects += 1
             co = _transform(matrix, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
             loop_vert = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
@@ -855,6 +828,69 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=N
         finally:
             ev.to_mesh_clear()
 
+
+
+def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=None):
+    """Read the renderable scene into (SceneData, ReadReport).  Never modifies the scene.
+
+    ``virtual``: names of lights that are not in the photo (virtual lamps, added after the
+    precompute): they are read off in the photo (intensity 0) at their current power, and an
+    area light among them as a core Light rather than patches (so that it can be added to a
+    finished solution without new links).
+
+    ``lamps``: the lamp records of the scene's last precompute (state.py), or None before the
+    first.  A light carrying a record's identity is read as that record says: under its label
+    (a rename changes nothing), in the photo or not, at the power and colour its map was
+    computed at (the light's present power and colour are the drivers' business); a light
+    without one is new since, so virtual.  Of two lights with one identity (a duplicate), the
+    one named as the record is the lamp, the other is new."""
+    if hasattr(context_or_scene, "scene") and hasattr(context_or_scene, "view_layer"):
+        scene = context_or_scene.scene
+        if depsgraph is None:
+            depsgraph = context_or_scene.evaluated_depsgraph_get()
+    else:
+        scene = context_or_scene
+        view_layer = scene.view_layers[0] if depsgraph is None else depsgraph.view_layer
+        if depsgraph is None:
+            depsgraph = view_layer.depsgraph
+    report = ReadReport()
+    r = _Reader(scene, report, virtual, lamps)
+    labels_seen: dict = {}
+    # depsgraph.object_instances: every evaluated object of the view layer plus the instances
+    # (collection instances, geometry-nodes and particle instances) with their world matrices.
+    for inst in _ordered_instances(depsgraph):
+        ev = inst.object
+        obj = ev.original
+        if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
+            continue
+        parent = inst.parent.original if inst.is_instance and inst.parent is not None else None
+        if parent is not None and parent == obj and obj.type != "MESH":
+            # a curve's or text's own geometry, also listed as an instance of itself (it is
+            # read once, as the object; a mesh's geometry-nodes instances are its own)
+            continue
+        label = obj.name if parent is None else f"{parent.name}/{obj.name}"
+        if label in labels_seen:
+            labels_seen[label] += 1
+            label = f"{label}.{labels_seen[label]}"
+        else:
+            labels_seen[label] = 0
+        role_of = parent if parent is not None and has_role(parent, roles) else obj
+        role = object_role(role_of, roles)
+        if role is None:
+            report.warn(f"Object '{role_of.name}': unknown {ids.ROLE} "
+                        f"'{role_of.get(ids.ROLE)}', read as relit")
+            role = "relit"
+        if role == "virtual" and moving(role_of):     # sphere shadows at render time
+            report.moving_objects.append(label)
+            continue
+        if obj.hide_render or (parent is not None and parent.hide_render) or role == "ignored":
+            report.ignored_objects.append(label)
+            continue
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        if obj.type == "LIGHT":
+            r.light(obj, ev, label, matrix, parent)
+        else:
+            r.mesh(obj, ev, label, matrix, parent, role)
     cam = scene.camera
     viewpoint = None
     if cam is not None:
@@ -863,7 +899,16 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=N
     else:
         report.warn("The scene has no active camera: no viewpoint")
 
-    image_list = [v for v in images.values() if v is not None]
+    return _scene_data(r, report, viewpoint, lamps)
+
+
+def _scene_data(r, report, viewpoint, lamps):
+    """The SceneData of what ``r`` gathered, checked (the report's warnings and errors)."""
+    corners, rho, emission, lamp, occluder, group, uvs, image_idx = (
+        r.corners, r.rho, r.emission, r.lamp, r.occluder, r.group, r.uvs, r.image_idx)
+    lamp_names, lamp_intensity, light_rows, virtual_patch = (
+        r.lamp_names, r.lamp_intensity, r.light_rows, r.virtual_patch)
+    image_list = [v for v in r.images.values() if v is not None]
 
     def cat(parts, shape, dtype):
         return np.concatenate(parts).astype(dtype) if parts else np.zeros(shape, dtype)

@@ -183,6 +183,20 @@ def has_kept(scene) -> bool:
     return header is not None and header.get("run") == st.get("run")
 
 
+def kept_problem(scene):
+    """Why the file's kept solution is not used (None: there is none, or it is used)."""
+    st = status(scene)
+    header = _kept_header(scene)
+    if not st or header is None or _in_memory(scene, st.get("run")) is not None:
+        return None
+    if header.get("version") != _version():
+        return (f"the solution kept in the file was made by Relight "
+                f"{header.get('version', '?').split('/')[0]}")
+    if header.get("run") != st.get("run"):
+        return "the solution kept in the file is of an earlier run"
+    return None
+
+
 def forget(scene):
     """Drop ``scene``'s status, last result and kept solution (Clear)."""
     _RESULTS.pop(scene.session_uid, None)

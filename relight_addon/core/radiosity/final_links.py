@@ -10,7 +10,6 @@ the rows of closed views are then made exactly one (radiosity.conserve).
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +19,7 @@ from ..geometry.patch import bilinear_point
 from ..geometry.raycast import ray_offset
 from ..geometry.sampling import R2, area_uniform_uv, gauss_cells, jacobian_coefficients, quadrature
 from ..numerics import nonzero, safe_div
+from ..progress import chunked
 from .hierarchy import Hierarchy
 from .links import (INVISIBLE, PARTIAL, VISIBLE, LeafGather, close_pairs, no_timer,
                     segment_ranges, visibility_estimated)
@@ -189,10 +189,7 @@ def _run_chunks(process, link_chunks, rng):
     link_chunks = [c for c in link_chunks if len(c)]
     seeds = rng.integers(0, 2**63 - 1, size=len(link_chunks))
     jobs = [(c, np.random.default_rng(int(sd))) for c, sd in zip(link_chunks, seeds)]
-    if len(jobs) > 1 and _THREADS > 1:
-        with ThreadPoolExecutor(_THREADS) as pool:
-            return list(pool.map(lambda job: process(*job), jobs))
-    return [process(*job) for job in jobs]
+    return chunked(lambda job: process(*job), jobs, _THREADS)
 
 
 @dataclass

@@ -24,6 +24,7 @@ from ..geometry.raycast import ray_offset
 from ..geometry.sampling import quadrature
 from ..lights import light_irradiance
 from ..numerics import nonzero
+from ..progress import Cancelled, report, reporting, tick  # noqa: F401  (Cancelled: callers')
 from ..scene import SceneData
 from .clusters import (build_cluster_tree, cluster_operator, cluster_transport,
                        cluster_visibility, link_clusters)
@@ -49,8 +50,6 @@ LAMP_PATCHES_MAX = 64
 SHADOW_AREA_FACTOR = 4.0
 
 
-class Cancelled(Exception):
-    """Raised when the progress callback asks to stop."""
 
 
 @dataclass
@@ -373,21 +372,23 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     (``_final_links``), the leaf system they gather with (``_gathering``: conserved rows,
     exposure, the lights' direct light), and the per-lamp solve.
     """
+    with reporting(progress):
+        return _solve_radiosity(scene, quality, occluder, solver, seed, light_occluder,
+                                light_lift)
+
+
+def _solve_radiosity(scene, quality, occluder, solver, seed, light_occluder, light_lift):
     q = get_preset(quality)
     scene.validate_for_solve()
     rng = np.random.default_rng(seed)
     timer = _Timer()
-
-    def report(frac, msg):
-        if progress is not None and progress(frac, msg) is False:
-            raise Cancelled(msg)
-
+    report(0.0, "Linking the surfaces", 0.05)
     with timer("setup"):
         start = _initial_links(scene, q, occluder, rng)
     h, occluder, scale, contacts = start.h, start.occluder, start.scale, start.contacts
-    kept, b_est, b_scale = _refine(scene, q, start, rng, timer, report)
+    kept, b_est, b_scale = _refine(scene, q, start, rng, timer)
 
-    report(0.7, f"Form factors and visibility for {kept.n} links")
+    report(0.7, f"Light between {kept.n:,} pairs of surface pieces", 0.9)
     receiver, source = kept.receiver, kept.source
     spread_links = _unresolved_shadows(h, kept, b_est, b_scale, start.rho_max, q,
                                        start.min_area, occluder, seed, scale, timer, contacts)
@@ -400,7 +401,7 @@ def solve_radiosity(scene: SceneData, quality="high", occluder="auto", solver=No
     system, gather, light_occ, light_unocc = _gathering(
         h, gather, start.clusters, occluder, seed, scale, scene, q, lamp_occluder, light_lift,
         rng, timer)
-    report(0.9, "Solving per-lamp radiosity")
+    report(0.9, "Solving the light of each lamp", 1.0)
     with timer("solve"):
         E = _lamp_emission(scene, system, light_occ)
         basis, info = system.solve(E, solver or q.solver, tol=q.tol)
@@ -479,7 +480,7 @@ def _initial_links(scene, q: Quality, occluder, rng) -> _Start:
                   e_max)
 
 
-def _refine(scene, q: Quality, start: _Start, rng, timer, report):
+def _refine(scene, q: Quality, start: _Start, rng, timer):
     """The oracle's passes: links refined on a radiosity estimate solved on their own
     estimates, then on the refined links' (q.passes).  Returns the kept links, and the last
     estimate's per-element radiosity and brightness scale."""
@@ -499,11 +500,15 @@ def _refine(scene, q: Quality, start: _Start, rng, timer, report):
         b_est, b_var, b_scale = _estimate_radiosity(scene, q, start, lights, kept)
     fresh_r = fresh_s = np.zeros(0, np.int64)
     for pass_no in range(q.passes):
-        report(0.05 + 0.6 * pass_no / q.passes, f"Refining links (pass {pass_no + 1}/{q.passes})")
+        report(0.05 + 0.6 * pass_no / q.passes,
+               f"Refining where the light changes (pass {pass_no + 1} of {q.passes})",
+               0.05 + 0.6 * (pass_no + 1) / q.passes)
         changed = False
         pending, kept = kept, None         # one copy of the links at a time (GBs on the office)
         kept_parts = []
-        for _ in range(MAX_REFINE_ROUNDS):
+        for round_no in range(MAX_REFINE_ROUNDS):
+            # (rounds shrink as the links settle: about half the pass is done after 3)
+            tick(1.0 - 0.5 ** (round_no / 3.0))
             if len(fresh_r):
                 with timer("refine"):
                     F, spread, free, partial, Fp = oracle_estimates(
@@ -610,8 +615,10 @@ def _gathering(h, gather, clusters, occluder, seed, scale, scene, q: Quality, la
     with timer("conserve"):
         system, gather = _final_system(h, gather, clusters, occluder, seed, scale, scene,
                                        q.quadrature)
+    tick()
     with timer("exposure"):
         _expose(h, system, gather, occluder, seed, scale, scene, q)
+    tick()
     with timer("lights"):
         light_occ, light_unocc = lights_on_elements(scene, h, system.leaves, lamp_occluder,
                                                     q.quadrature, q.rays,

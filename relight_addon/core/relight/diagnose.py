@@ -23,12 +23,11 @@ import numpy as np
 from ..numerics import nonzero, safe_div
 from ..texture.colour import luminance
 from .albedo import RHO_ESTIMATE_MAX
+from .enclosure import enclosing_group
 
 CLIPPED_SHARE = 0.05
 OFF_FACTOR = 2.0
 TOUCHING = 0.002            # of the scene's bounding diagonal (1 cm in a 5 m room)
-ENCLOSURE_RAYS = 64
-ENCLOSED_SHARE = 0.75       # of those rays meeting one object first: it closes the lamp in
 
 
 def clipped_surfaces(sol, use_patch, group_names):
@@ -104,30 +103,6 @@ def lamp_clearance(scene, lamp):
         return np.inf
     return min(float(_point_triangle_distance(np.asarray(p, float), tris).min()) for p in pts) \
         - radius
-
-
-def _fibonacci_sphere(n):
-    i = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * i / n
-    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-def enclosing_group(scene, occluder, point):
-    """The patch group (object) closing every direction around ``point``, or None."""
-    if occluder is None or getattr(occluder, "patch_of_triangle", None) is None:
-        return None
-    d = _fibonacci_sphere(ENCLOSURE_RAYS)
-    t, prim = occluder.first_hit(np.broadcast_to(np.asarray(point, float), d.shape).copy(), d)
-    if np.any(prim < 0):
-        return None
-    # most rays meet the object first; the others a face coinciding with one of its own (a
-    # box's bottom lying on the floor)
-    groups, counts = np.unique(np.asarray(scene.group)[occluder.patch_of_triangle[prim]],
-                               return_counts=True)
-    best = int(np.argmax(counts))
-    return int(groups[best]) if counts[best] >= ENCLOSED_SHARE * len(prim) else None
 
 
 def _lamp_points(scene, lamp):

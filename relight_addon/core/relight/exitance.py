@@ -18,6 +18,7 @@ from scipy.optimize import nnls
 
 from ..geometry.patch import bilinear_point
 from ..numerics import safe_div
+from ..progress import tick
 from ..radiosity.presets import get_preset
 from ..texture.colour import LUMINANCE, luminance
 from ..texture.mapping import adjacent_texel_pairs, count_adjacent_texel_pairs
@@ -122,6 +123,7 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
     on = scene.lamp_intensity > 0
     eq_k = _equal_factors(scene, est, use_patch)
     nnls_k = nnls_factors(sol, tm, photo, use_patch)
+    tick(0.1)
 
     rho_first = sol.system.rho.copy()          # eq 4.1's, at the first guess of rho^
 
@@ -143,9 +145,11 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
         scale = rounds(eq_k.copy(), rho_mean)
     else:
         scale = rounds(np.ones(k), rho_mean)
+        tick(0.3)
         if opt.fit_indirect and tm.n_texels:
             rho_mean, scale, rho_sigma = _fit_rho_mean(sol, tm, photo, scale, texel_light,
                                                        on, rho_mean, rounds)
+        tick(0.7)
         fit = edge_fit(sol, tm, photo, scale, texel_light, on, folds=JACKKNIFE_FOLDS,
                        indirect=False)
         if on.sum() >= 2 and tm.n_texels:
@@ -156,6 +160,7 @@ def fit_lamps(sol, tm, photo, use_patch, est, opt, texel_light) -> LampEstimate:
             ratio[on], sigma[on] = fit.t, sig
             weight[on] = 1.0 if opt.exitance == "photo" else photo_weights(fit.t, sig)
             if np.any(weight > 0):
+                tick(0.9)
                 scale = rounds(scale * photo_factors(ratio, weight, on), rho_mean)
     return LampEstimate(scale, ratio, sigma, weight, eq_k, nnls_k, opt.exitance, rho_mean,
                         rho_sigma)

@@ -20,6 +20,13 @@ side, e.g. a sun on the roof) does not count.  A face lit on both sides (each at
 the photographed side being the front) also gets a back: a copy facing the other way that
 reflects light with the front's reflectance but has no texels of its own (the photo shows one
 side).  Faces lit only indirectly on their back (a table top's underside) stay one-sided.
+
+A closed object modelled inside out (a box whose normals point in) shows its inside to its own
+faces: most rays from a face's front meet the face's own object (OWN_SHARE), few from its
+back.  Such a face, where neither the camera nor the lamps decide, is turned round (its
+outside is what the photo shows), and a face whose back is a closed object's inside is never
+turned to it, however that inside is lit (a lamp in a box); the room the camera stands in is
+no such object (enclosure.py).
 """
 from __future__ import annotations
 
@@ -30,13 +37,16 @@ import numpy as np
 from ..geometry.extent import bounding_diagonal
 from ..geometry.patch import bilinear_point, reverse_winding
 from ..geometry.raycast import ray_offset
+from ..progress import tick
 from ..scene import SceneData
 from ..texture.colour import luminance
 from .direct import lamp_irradiance
+from .enclosure import enclosing_group
 
 TWO_SIDED_SHARE = 0.15
 DIM_LIGHT = 0.01
 OPEN_RAYS = 16
+OWN_SHARE = 0.9             # of a side's rays meeting the face's own object: its inside
 LIGHT_RAYS = 8
 CHUNK = 1 << 15         # faces looked at at once
 _PROBES = np.array([[0.5, 0.5], [0.15, 0.15], [0.85, 0.15], [0.85, 0.85], [0.15, 0.85]])
@@ -85,15 +95,20 @@ def side_evidence(scene: SceneData, occluder, patches, seed=0):
     lit = np.zeros((len(patches), 2))
     camera = np.zeros((len(patches), 2), bool)
     openness = np.zeros((len(patches), 2))
+    own = np.zeros((len(patches), 2))
     for first in range(0, len(patches), CHUNK):
+        tick(first / max(len(patches), 1))
         part = slice(first, first + CHUNK)
         _evidence(scene, occluder, patches[part], normal, size, eps, rng,
-                  seed + 2 * (first // CHUNK), lit[part], camera[part], openness[part])
-    return lit, camera, openness
+                  seed + 2 * (first // CHUNK), lit[part], camera[part], openness[part],
+                  own[part])
+    return lit, camera, openness, own
 
 
-def _evidence(scene, occluder, patches, normal, size, eps, rng, seed, lit, camera, openness):
-    """side_evidence for one chunk of faces, written into ``lit``, ``camera``, ``openness``."""
+def _evidence(scene, occluder, patches, normal, size, eps, rng, seed, lit, camera, openness,
+              own):
+    """side_evidence for one chunk of faces, written into ``lit``, ``camera``, ``openness``
+    and ``own`` (the share of a side's rays that meet the face's own object first)."""
     c = scene.corners[patches]
     n = normal[patches]
     pts = bilinear_point(c[:, None], _PROBES[None, :, 0], _PROBES[None, :, 1])     # (p, 5, 3)
@@ -114,8 +129,14 @@ def _evidence(scene, occluder, patches, normal, size, eps, rng, seed, lit, camer
         if occluder is not None:
             d = _cosine_directions(nn, OPEN_RAYS, rng)                          # (p, r, 3)
             o = np.repeat(centre + eps * nn, OPEN_RAYS, axis=0)
-            hit = occluder.first_hit_distance(o, d.reshape(-1, 3), tmax=4 * size)
+            hit, prim = occluder.first_hit(o, d.reshape(-1, 3), tmax=4 * size)
             openness[:, side] = (~np.isfinite(hit)).reshape(-1, OPEN_RAYS).mean(axis=1)
+            faces_of = getattr(occluder, "patch_of_triangle", None)
+            if faces_of is not None:
+                group = np.asarray(scene.group)
+                met = np.where(prim >= 0, group[faces_of[np.maximum(prim, 0)]], -1)
+                mine = met.reshape(-1, OPEN_RAYS) == group[patches][:, None]
+                own[:, side] = mine.mean(axis=1)
 
 
 def orient(scene: SceneData, occluder, seed=0) -> Orientation:
@@ -125,7 +146,7 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     p = scene.n_patches
     if len(faces) == 0:
         return Orientation(scene, np.zeros(p, bool), np.zeros(0, np.int64))
-    lit, camera, openness = side_evidence(scene, occluder, faces, seed)
+    lit, camera, openness, own = side_evidence(scene, occluder, faces, seed)
     # The outside of a room (rays from it leave the scene) is not a side anyone photographed,
     # even where a sun lights it: its light does not count.
     outside = openness > 0.5
@@ -141,8 +162,18 @@ def orient(scene: SceneData, occluder, seed=0) -> Orientation:
     # Without a camera, openness decides for unlit faces (with one it is not needed, and a face
     # lying on another -- a box's bottom on the floor -- looks open from below).
     back_enclosed = unlit & (scene.viewpoint is None) & outside[:, 0] & ~outside[:, 1]
-    # The side the camera sees is the photographed one; else the lit side; else the inside.
-    flip = np.where(seen_back | seen_front, seen_back, back_lit | back_enclosed)
+    # a closed object's inside faces its own faces (not the room the camera is in)
+    room = enclosing_group(scene, occluder, scene.viewpoint) if scene.viewpoint is not None \
+        else None
+    not_room = np.asarray(scene.group)[faces] != (-1 if room is None else room)
+    inside_out = (own[:, 0] >= OWN_SHARE) & (own[:, 1] < 1.0 - OWN_SHARE) & not_room
+    inside_back = (own[:, 1] >= OWN_SHARE) & (own[:, 0] < 1.0 - OWN_SHARE) & not_room
+    # The side the camera sees is the photographed one; else the lit side, but never a closed
+    # object's inside (a lamp in a box lights that, not what the photo shows); else the
+    # outside of a closed object; else the inside.
+    flip = np.where(seen_back | seen_front, seen_back,
+                    ((back_lit | back_enclosed) & ~inside_back)
+                    | (inside_out & ~(some & ~back_lit)))
     both = some & (lit.min(axis=1) >= TWO_SIDED_SHARE * peak)
     flipped = np.zeros(p, bool)
     flipped[faces[flip]] = True

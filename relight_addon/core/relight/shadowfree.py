@@ -34,7 +34,8 @@ import numpy as np
 
 from ..numerics import safe_div
 from ..radiosity.memory import give_back_memory
-from ..radiosity.precompute import Cancelled, regather, solve_basis, solve_radiosity
+from ..progress import report, reporting, scope
+from ..radiosity.precompute import regather, solve_basis, solve_radiosity
 from ..radiosity.presets import PROXY_FACTOR, get_preset
 from ..radiosity.proxy import build_proxy
 from ..scene import SceneData
@@ -136,25 +137,19 @@ class ShadowFreeResult:
 
 
 class _Stage:
-    """Progress reports and per-stage timings."""
+    """Progress reports (core/progress.py: a stage spans [frac, until] of the run) and
+    per-stage timings."""
 
-    def __init__(self, progress, timings):
-        self.progress, self.timings, self.t0, self.name = progress, timings, None, None
+    def __init__(self, timings):
+        self.timings, self.t0, self.name = timings, None, None
 
-    def __call__(self, frac, name):
+    def __call__(self, frac, name, until=None):
         now = time.perf_counter()
         if self.name is not None:
             self.timings[self.name] = self.timings.get(self.name, 0.0) + now - self.t0
         self.name, self.t0 = name, now
-        if self.progress is not None and name is not None:
-            if self.progress(frac, name) is False:
-                raise Cancelled(name)
-
-    def sub(self, lo, hi):
-        """A progress callback for a sub-task that spans [lo, hi] of the whole."""
-        if self.progress is None:
-            return None
-        return lambda f, msg: self.progress(lo + (hi - lo) * f, msg)
+        if name is not None:
+            report(frac, name, until)
 
 
 def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occluder="auto",
@@ -171,14 +166,19 @@ def shadow_free(scene: SceneData, options: ShadowFreeOptions | None = None, occl
         # Virtual objects are not in the photo: the room is precomputed without them, then
         # their shadows and reflections are put into the maps (virtual.py).
         if opt.mode != "texel":
-            raise ValueError("Virtual objects need the per-texel shadow removal")
+            raise ValueError("Virtual objects need Shadow Removal 'Per Texel'")
         from .virtual import add_objects
         room = shadow_free(scene.without_virtual(), options, occluder, progress, reuse)
         return add_objects(room, scene)
     if scene.n_lamps == 0:
         raise ValueError("The scene has no lamps: nothing to relight")
+    with reporting(progress):
+        return _shadow_free(scene, opt, occluder, reuse)
+
+
+def _shadow_free(scene, opt, occluder, reuse):
     timings = {}
-    stage = _Stage(progress, timings)
+    stage = _Stage(timings)
     if occluder == "auto":
         occluder = scene.make_occluder()
     run = _read(scene, opt, occluder, reuse, stage, timings)
@@ -222,11 +222,11 @@ def _read(scene, opt, occluder, reuse, stage, timings) -> _Run:
     dense mesh, and the per-texel light."""
     orientation = None
     if opt.orient:
-        stage(0.0, "Orienting faces")
+        stage(0.0, "Turning faces to their photographed side", 0.01)
         orientation = orient(scene, occluder, opt.seed)
         scene = orientation.scene
 
-    stage(0.01, "Reading textures")
+    stage(0.01, "Reading the photos", 0.012)
     shapes = [texels_of(im).shape[:2] for im in scene.images]
     image_of = scene.image if scene.image is not None else np.full(scene.n_patches, -1)
     uv = scene.uv if scene.uv is not None else np.zeros((scene.n_patches, 4, 2))
@@ -241,8 +241,8 @@ def _read(scene, opt, occluder, reuse, stage, timings) -> _Run:
     else:
         if opt.mode == "element":
             raise ValueError(f"A mesh of {scene.n_patches} faces is solved on a proxy, which "
-                             "needs the per-texel shadow removal (mode 'texel')")
-        stage(0.015, "Placing the texels on the proxy")
+                             "needs Shadow Removal 'Per Texel'")
+        stage(0.015, "Placing the photos' texels on the proxy", 0.02)
         rad_scene, rad_tm = proxy.scene, texels_on(proxy, scene, tm)
         rad_occluder = proxy.scene.make_occluder() if occluder is not None else None
         rad_image = np.where(np.bincount(rad_tm.patch, minlength=proxy.n_patches) > 0, 0, -1)
@@ -256,7 +256,7 @@ def _initialise(run: _Run, reuse):
     and the per-leaf albedo."""
     opt, stage, proxy, orientation = run.opt, run.stage, run.proxy, run.orientation
     rad_scene, rad_tm, photo = run.rad_scene, run.rad_tm, run.photo
-    stage(0.02, "Estimating reflectances (eq 4.1)")
+    stage(0.02, "Estimating the reflectances", 0.05)
     patch_mean, cnt = patch_means(rad_tm, photo, rad_scene.n_patches)
     use_patch = (run.rad_image >= 0) & (cnt > 0) & (rad_scene.lamp < 0)  # photographed surfaces
     est_ids = np.flatnonzero(use_patch)
@@ -274,13 +274,13 @@ def _initialise(run: _Run, reuse):
     scene1 = rad_scene.with_rho(rho_patch)
 
     if reuse is not None and opt.mode != "element":
-        stage(0.05, "Reusing the radiosity mesh and links")
+        stage(0.05, "Reusing the light's mesh and links", 0.4)
         sol = copy.copy(reuse)                 # the caller's solution stays as it was
         sol.system = copy.copy(reuse.system)
         sol.scene = scene1
         solve_basis(sol, scene1.rho[sol.system.patch])    # scene exitances, eq 4.1 reflectances
     else:
-        stage(0.05, "First radiosity solution")
+        stage(0.05, "Solving the light in the room", 0.4)
         # A decimated proxy has no contact lines to split at (radiosity.contacts): its
         # triangles lying on one another are the decimation's, not objects standing on a
         # surface.  With them, family room 5's 100k-triangle scan at medium pinned a lamp 15 %
@@ -290,10 +290,11 @@ def _initialise(run: _Run, reuse):
         if proxy is not None:
             quality = quality.with_(contact_levels=0)
             lamp_view = _proxy_lamp_view(proxy, run.occluder)
-        sol = solve_radiosity(scene1, quality, occluder=run.rad_occluder, seed=opt.seed,
-                              progress=stage.sub(0.05, 0.4), **lamp_view)
+        with scope(0.05, 0.4):
+            sol = solve_radiosity(scene1, quality, occluder=run.rad_occluder, seed=opt.seed,
+                                  **lamp_view)
         sol.context["proxy"] = proxy
-    stage(0.4, "Lamp exitances and reflectances")
+    stage(0.4, "Estimating the lamps from the photo", 0.6)
     run.lamps = fit_lamps(sol, rad_tm, photo, use_patch, est, opt, run.texel_light)
     run.misfit = photo_misfit(sol, rad_tm, photo, use_patch)
     run.solution, run.use_patch, run.est_ids, run.area = sol, use_patch, est_ids, area
@@ -318,7 +319,7 @@ def _result(run: _Run, texture, maps, coverage, solution, first=None, stats=None
 
 def _drb97(run: _Run) -> ShadowFreeResult:
     """4. DRB97: the photo as it is, maps B_k / sum B."""
-    run.stage(0.9, "Display maps")
+    run.stage(0.9, "Making the lamps' maps", 1.0)
     sol, tm, scene = run.solution, run.tm, run.scene
     mp, cov = map_images(tm, ratio_maps(sol, run.rad_tm, weights=scene.lamp_intensity))
     return _result(run, texture_images(tm, run.photo, scene.images), mp, cov, sol)
@@ -326,7 +327,7 @@ def _drb97(run: _Run) -> ShadowFreeResult:
 
 def _per_texel(run: _Run) -> ShadowFreeResult:
     """2. Per texel: direct light ray-cast at every texel, indirect from the solution."""
-    run.stage(0.6, "Per-texel irradiance and maps")
+    run.stage(0.6, "Lighting every texel and making the maps", 1.0)
     run.photo = None                 # read again block by block: not held at the peak
     run.texel_light.release()
     give_back_memory()
@@ -342,14 +343,14 @@ def _per_element(run: _Run) -> ShadowFreeResult:
     opt, sol, tm, photo = run.opt, run.solution, run.tm, run.photo
     white = float(np.percentile(luminance(photo), 99)) if len(photo) else 1.0
     if opt.refine:
-        run.stage(0.45, "Texture-based refinement")
+        run.stage(0.45, "Refining where the photo's colours change", 0.6)
         refine_by_texture(sol, tm, photo, white, run.occluder, opt, run.lamps.scale)
         regather(sol, opt.seed + 1)
         albedo_rounds(sol, tm, photo, run.use_patch, run.lamps.rho_mean, opt.albedo_rounds,
                       run.lamps.scale)
     t_final, counts, reference_info = _t_final(run)
     first, sol = sol, _fresh_solution(run, t_final, white)
-    run.stage(0.92, "Display maps")
+    run.stage(0.92, "Making the lamps' maps", 1.0)
     scene = run.scene
     Hocc_k, HU_k, _, _ = Transport(sol).irradiance(sol.basis)
     elem = texel_elements(sol.hierarchy, tm)
@@ -369,7 +370,7 @@ def _t_final(run: _Run):
     (frontier, references, rho_corr, T_final: eq 4.8, 4.9) when ``opt.reference``: (T_final,
     (shadowed, frontier, referenced, default-referenced leaves), reference info)."""
     opt, sol, tm, scene = run.opt, run.solution, run.tm, run.scene
-    run.stage(0.6, "Blocked irradiance and T_inter (eq 4.5, 4.6)")
+    run.stage(0.6, "Removing the photographed shadows", 0.7)
     Hocc_k, HU_k, Docc_k, DU_k = Transport(sol).irradiance(sol.basis)
     elem = texel_elements(sol.hierarchy, tm)
 
@@ -379,7 +380,7 @@ def _t_final(run: _Run):
     HU = as_given(HU_k, scene)
     t_inter = run.photo * clipped_ratio(per_texel(HU), per_texel(as_given(Hocc_k, scene)),
                                         fmin=1.0)
-    run.stage(0.7, "Frontier and reference elements (eq 4.8, 4.9)")
+    run.stage(0.7, "Reference surfaces for the shadows' edges", 0.75)
     counts = (0, 0, 0, 0)
     t_final = t_inter
     reference_info = None
@@ -396,15 +397,16 @@ def _fresh_solution(run: _Run, t_final, white):
     unoccluded gather), refined by texture and its albedo re-estimated as the first was."""
     opt, tm, scene, orientation = run.opt, run.tm, run.scene, run.orientation
     scale_k, est_ids, area = run.lamps.scale, run.est_ids, run.area
-    run.stage(0.75, "Fresh solution on T_final")
+    run.stage(0.75, "Solving again on the shadow-free textures", 0.9)
     pm, _ = patch_means(tm, t_final, scene.n_patches)
     rho2 = scene.rho.copy()
     if len(est_ids):
         rho2[est_ids] = estimate_reflectance(pm[est_ids], area[est_ids], run.lamps.rho_mean).rho
     if orientation is not None and len(orientation.back_of):
         rho2[-len(orientation.back_of):] = rho2[orientation.back_of]
-    sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=run.occluder,
-                          seed=opt.seed + 2, progress=run.stage.sub(0.75, 0.9))
+    with scope(0.75, 0.9):
+        sol = solve_radiosity(scene.with_rho(rho2), opt.preset, occluder=run.occluder,
+                              seed=opt.seed + 2)
     if opt.refine:
         refine_by_texture(sol, tm, t_final, white, run.occluder, opt, scale_k, colour=False)
         regather(sol, opt.seed + 3)
@@ -436,7 +438,7 @@ def _proxy(scene, opt, reuse, stage, orientation):
     surfaces = int(np.count_nonzero(scene.lamp < 0))
     if surfaces <= PROXY_FACTOR * faces:
         return None
-    stage(0.012, f"Decimating {surfaces} faces to a proxy of {faces}")
+    stage(0.012, f"Decimating {surfaces:,} faces to a proxy of {faces:,}", 0.015)
     return build_proxy(scene, faces, None if orientation is None else orientation.back_of)
 
 

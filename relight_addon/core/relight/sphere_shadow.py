@@ -84,16 +84,27 @@ def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull=None):
     (a running product and maximum), as the node groups evaluate it."""
     centres, radii = np.asarray(centres, float), np.asarray(radii, float)
     lamp = lamp_cap(points, lamp_pos, lamp_radius)
-    part = 1.0
+    part = None
     if hull is not None:
-        part = np.maximum(blocked_part(points, lamp, hull[0], hull[1]), 1e-6)
-    product = np.ones(len(points))
-    maximum = np.zeros(len(points))
-    for c, r in zip(centres, radii):
-        b = blocked_part(points, lamp, c, r)
+        part = blocked_part(points, lamp, hull[0], hull[1])
+    blocked = (blocked_part(points, lamp, c, r) for c, r in zip(centres, radii))
+    return combined_visibility(blocked, len(points), part)
+
+
+def combined_visibility(blocked, n, part=None):
+    """Visible fraction (n,) of a light past all the spheres, from the parts ``blocked`` (an
+    iterable of (n,) arrays in [0, 1], one per sphere) that each sphere hides alone: the rule of
+    :func:`sphere_visibility` (``part`` = the hull's blocked part S, or None for the plain
+    product).  Shared by the lamps' shadows and the shadows under an environment
+    (core/ar/env_shadow.py): one implementation."""
+    hull = part is not None
+    part = np.maximum(part, 1e-6) if hull else 1.0
+    product = np.ones(n)
+    maximum = np.zeros(n)
+    for b in blocked:
         product = product * (1.0 - np.minimum(b / part, 1.0))
         maximum = np.maximum(maximum, b)
-    if hull is None:
+    if not hull:
         return np.clip(product, 0.0, 1.0)
     return np.clip(1.0 - np.maximum(part * (1.0 - product), maximum), 0.0, 1.0)
 

@@ -17,11 +17,10 @@ fit's sample of texels).
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from ..geometry.patch import bilinear_point
+from ..progress import chunked
 from ..radiosity.exposure import read_in_the_open
 from ..radiosity.memory import TEXEL_CACHE_BYTES, give_back_memory
 from ..texture.colour import luminance
@@ -198,12 +197,7 @@ class TexelLight:
 
         starts = [0] + list(range(TEXEL_CHUNK - first % TEXEL_CHUNK, T, TEXEL_CHUNK)) \
             if T else []
-        if len(starts) > 1:
-            with ThreadPoolExecutor(2) as pool:
-                list(pool.map(chunk, starts))
-        else:
-            for c0 in starts:
-                chunk(c0)
+        chunked(chunk, starts, 2)
         return O if luminance_only else (U, O)
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..radiosity.memory import give_back_memory
+from ..progress import tick
 from .maps import DISPLAY_EPS, clipped_ratio, dilated, direct_fraction, texels_of
 from . import texel
 from .texel import leaf_indirect
@@ -46,7 +47,9 @@ def texel_maps(light, sol, scale, scene, images, block=None) -> TexelMaps:
     denominator = np.empty((tm.n_texels, 3), np.float32)
     leaf = leaf_indirect(sol)
     for start, stop in _blocks(tm.n_texels, block):
+        tick(0.9 * start / max(tm.n_texels, 1))
         (O_k, U_k), (ind_occ, ind_un) = light.rows(start, stop).parts(sol, scale, leaf)
+        tick(0.9 * (start + 0.5 * (stop - start)) / max(tm.n_texels, 1))
         Hocc_k, HU_k = np.maximum(O_k + ind_occ, 0.0), np.maximum(U_k + ind_un, 0.0)
         Hocc = as_given(Hocc_k, scene)
         # Removing occlusion never darkens (E-bar >= 0; sampling noise could say otherwise).
@@ -75,6 +78,7 @@ def lamp_maps(light, sol, lamps, s, denominator, block=None):
     tm = light.tm
     out = _Images(tm, len(lamps))
     for start, stop in _blocks(tm.n_texels, block):
+        tick(start / max(tm.n_texels, 1))
         part = light.rows(start, stop)
         read = part.reader(sol)
         O = np.moveaxis(part.direct()[1][:, lamps] * s, 1, 0)                      # (m, t, 3)
