@@ -566,13 +566,14 @@ def direct_max(image) -> float:
     return top
 
 
-def shadowed_terms(mat, lamp_group_of):
+def shadowed_terms(mat, lamp_group_of, cull=True):
     """The lamp terms of ``mat`` a moving object can darken: (lamp name, map node, shadow node)
     of the lamps with a group (where the spheres see them from) whose map has a direct part
     somewhere (above DIRECT_FLOOR).  Elsewhere the factor 1 - a (1 - V) is 1 within the floor,
-    wherever the object goes: a lamp behind a wall, a ceiling above downward lamps."""
+    wherever the object goes: a lamp behind a wall, a ceiling above downward lamps.  Without
+    ``cull``: every lamp with a group."""
     return [(lname, m, s) for lname, m, s in _lamp_terms(mat)
-            if lname in lamp_group_of and direct_max(m.image) > DIRECT_FLOOR]
+            if lname in lamp_group_of and (not cull or direct_max(m.image) > DIRECT_FLOOR)]
 
 
 def _surface_socket(tree):
@@ -597,10 +598,12 @@ def _unwire(mat):
         tree.links.new(own.outputs[0], surface)
 
 
-def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
+def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
     """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
     (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
-    (settled group, settled images) or None.
+    (settled group, settled images) or None.  ``cull`` False: every lamp term evaluates the
+    spheres at every shading point (the reach branch and the DIRECT_FLOOR test left out; what
+    the culled wiring is measured and tested against).
 
     Each lamp k that a moving object can darken (shadowed_terms) gets its own closure,
     Mix Shader(Reach_k, Emission(T x plain_k), Emission(T x term_k x (1 - a_k (1 - V_k)))), the
@@ -613,8 +616,8 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
     constant factor: Cycles keeps only that branch)."""
     tree = mat.node_tree
     flag_group, settled_images = settled if settled is not None else (None, [])
-    terms = shadowed_terms(mat, lamp_group_of) if sphere_groups else []
-    signature = repr((WIRING_VERSION, sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
+    terms = shadowed_terms(mat, lamp_group_of, cull) if sphere_groups else []
+    signature = repr((WIRING_VERSION, cull, sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
                       sorted(t[0] for t in terms),
                       None if flag_group is None else
                       (flag_group.get("relight_settled_run"),
@@ -728,11 +731,16 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
                 tree.links.new(term, scaled.inputs[0])
                 tree.links.new(f_e, scaled.inputs["Scale"])
                 plain = scaled.outputs[0]
+        shadowed = emission(s_node.outputs[0], f"Shadowed {lname}", (x1, y - 60))
+        if not cull:                     # reach taken as 1: the spheres everywhere
+            reach = still
+        if reach is None:
+            closures.append(shadowed)
+            continue
         mix = node("ShaderNodeMixShader", f"Branch {lname}", (x1 + 400, y))
         tree.links.new(reach, mix.inputs["Fac"])
         tree.links.new(emission(plain, f"Plain {lname}", (x1, y + 60)), mix.inputs[1])
-        tree.links.new(emission(s_node.outputs[0], f"Shadowed {lname}", (x1, y - 60)),
-                       mix.inputs[2])
+        tree.links.new(shadowed, mix.inputs[2])
         closures.append(mix.outputs[0])
     rest = [s for lname, _, s in _lamp_terms(mat) if lname not in wired]
     if rest:                             # the lamps no moving object darkens: one emission
@@ -754,12 +762,12 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
     return 1
 
 
-def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dict:
+def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=True) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
     no longer moving, settle their shadows where they stand (with ``result``, the scene's last
     ShadowFreeResult; without it the settled shadows are kept while the objects' meshes are the
-    same), and wire every relit material.  Returns a summary."""
+    same), and wire every relit material (``cull``: see _wire_material).  Returns a summary."""
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
@@ -803,7 +811,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
     settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if ids.ours(m, key) and m.node_tree is not None]
-    wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
+    wired = sum(_wire_material(m, lamps, wanted, settled, cull) for m in mats)
     tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
     warnings = []
     if tests > EEVEE_SPHERE_TESTS:
