@@ -59,7 +59,7 @@ WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is w
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
 SURFACE_KEY = "relight_sphere_surface" # on a relit material: the closure its output had before
 DIRECT_KEY = "relight_direct_max"      # on a map image: its largest alpha, for its content hash
-WIRING_VERSION = 2                     # of the material wiring (older wirings are made again)
+WIRING_VERSION = 3                     # of the material wiring (older wirings are made again)
 # A map whose direct part (alpha) stays below this everywhere gets no sphere shadow: dropping
 # it changes the lamp's term by at most this fraction (the half-float maps' own spacing is 1e-3).
 DIRECT_FLOOR = 1e-3
@@ -608,8 +608,8 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
     Each lamp k that a moving object can darken (shadowed_terms) gets its own closure,
     Mix Shader(Reach_k, Emission(T x plain_k), Emission(T x term_k x (1 - a_k (1 - V_k)))), the
     other lamps one Emission of their sum, all added; Reach_k = 1 where some object's bounding
-    sphere can hide a part of lamp k (sphere_shadow.may_shadow), and where it is 0 V_k is
-    exactly 1.  Cycles' SVM jumps over the branch a Mix Shader's 0 / 1 factor leaves out, with
+    sphere can hide a part of lamp k (sphere_shadow.may_shadow) and the map has a direct part
+    (a_k > 0); where it is 0 the factor 1 - a_k (1 - V_k) is exactly 1.  Cycles' SVM jumps over the branch a Mix Shader's 0 / 1 factor leaves out, with
     the nodes only that branch uses, so a shading point out of every object's reach pays the
     reach tests and not the spheres (EEVEE evaluates both branches).  Settled: the plain branch
     holds the settled shadow and the reach is 0 while the objects stand where it was traced (a
@@ -697,6 +697,10 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
                 reach = math("MAXIMUM", reach, g.outputs["Reach"], "Reach",
                              (x0 + 400, y - 120 * i - 60))
         alpha = m_node.outputs["Alpha"]
+        # where the map has no direct part (a = 0: the lamp's real shadow, faces turned away)
+        # the factor below is exactly 1: those points are out of reach too
+        reach = math("MULTIPLY", reach, math("GREATER_THAN", alpha, 0.0, "Direct",
+                                              (x0 + 400, y + 60)), "Reach direct", (x0 + 480, y + 60))
         # 1 - a (1 - V): only the direct part (the map's alpha) is shadowed
         lost = math("MULTIPLY", alpha, math("SUBTRACT", 1.0, vis, "Lost", (x0 + 560, y)),
                     "Direct part", (x0 + 700, y))
