@@ -22,11 +22,19 @@ Each configuration is saved to a .blend and rendered in a fresh process without 
   process: the first holds the shader compilation; compile = first frame - the baseline's first
   frame of the same round (the second frames show the per-frame shading cost).
 
+* Cycles at 16x16, 1 sample: the frame's fixed cost (scene sync and shader compilation), which
+  few-sample frames are dominated by;
+* the share of the 320x180 frame in each lamp's reach (the Mix Shaders' factors rendered as an
+  emission): the pixels that evaluate the spheres.
+
 The load average of the machine is read before and after every render (other agents share its
 two cores).  Writes benchmarks/results/moving_render.md and moving_render.png.
 
     python benchmarks/bench_moving_render.py [--counts 8,32,128] [--unculled 8,32]
         [--eevee 32,64] [--samples 4] [--runs 3] [--eevee-runs 2]
+    python benchmarks/bench_moving_render.py --reuse DIR --phases tiny,reach
+        # DIR: the .blend files a run left (printed); the other phases' figures are read back
+        # from the raw block of the markdown at --out
 """
 from __future__ import annotations
 
@@ -48,6 +56,10 @@ sys.path.insert(0, HERE)
 RES = (640, 360)
 TIMEOUT = 1800.0           # one render process at most (an unculled 128-sphere frame is slow)
 OUT = os.path.join(HERE, "results", "moving_render.md")
+# Mesa (llvmpipe) keeps compiled shaders on disk: a second process compiling the same EEVEE
+# material found them there (measured: 32 spheres 147 s, then 30 s), so every run compiles afresh
+NO_SHADER_CACHE = dict(os.environ, MESA_SHADER_CACHE_DISABLE="true",
+                       MESA_GLSL_CACHE_DISABLE="true")
 
 CHILD = r"""
 import json, os, sys, time
@@ -67,6 +79,54 @@ for i in range(frames):
 px = bpy.data.images["Render Result"]
 px.save_render(path.replace(".blend", f"_{engine}.png"))
 print("RENDER_TIMES " + json.dumps(out))
+"""
+
+REACH_CHILD = r"""
+import json, sys
+import numpy as np
+import bpy
+bpy.ops.wm.open_mainfile(filepath=sys.argv[-2], load_ui=False)
+scene = bpy.context.scene
+scene.render.engine = "CYCLES"
+scene.cycles.samples = 1
+scene.render.resolution_x, scene.render.resolution_y = 320, 180
+prefix = "Relight Shadow Branch "
+lamps = sorted({n.name[len(prefix):].rsplit(" ", 1)[0] for m in bpy.data.materials
+                if m.node_tree for n in m.node_tree.nodes if n.name.startswith(prefix)})
+share = {}
+for lamp in lamps + ["any lamp"]:
+    for m in bpy.data.materials:
+        nt = m.node_tree
+        out = nt and next((n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                           and n.is_active_output), None)
+        if out is None or not m.name.endswith(".relight"):
+            continue
+        facs = [n.inputs["Fac"].links[0].from_socket for n in nt.nodes
+                if n.name.startswith(prefix) and n.inputs["Fac"].is_linked
+                and (lamp == "any lamp" or n.name.startswith(prefix + lamp + " "))]
+        e = nt.nodes.get("_reach") or nt.nodes.new("ShaderNodeEmission")
+        e.name = "_reach"
+        for link in list(e.inputs["Color"].links):
+            nt.links.remove(link)
+        e.inputs["Color"].default_value = (0, 0, 0, 1)
+        acc = facs[0] if facs else None
+        for f in facs[1:]:
+            mx = nt.nodes.new("ShaderNodeMath")
+            mx.operation = "MAXIMUM"
+            nt.links.new(acc, mx.inputs[0])
+            nt.links.new(f, mx.inputs[1])
+            acc = mx.outputs[0]
+        if acc is not None:
+            nt.links.new(acc, e.inputs["Color"])
+        nt.links.new(e.outputs[0], out.inputs["Surface"])
+    bpy.ops.render.render()
+    path = sys.argv[-1].replace(".exr", f"_{lamp}.exr")
+    bpy.data.images["Render Result"].save_render(path)
+    img = bpy.data.images.load(path)
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    share[lamp] = float((px.reshape(-1, 4)[:, 0] > 0.5).mean())
+print("REACH " + json.dumps(share))
 """
 
 
@@ -120,11 +180,15 @@ def build(args, tmp):
     return paths, info_out
 
 
-def render(path, engine, samples, frames):
-    """[[seconds, load before, load after] per frame] of a fresh process, or None (why)."""
+def render(path, engine, samples, frames, res=None):
+    """[[seconds, load before, load after] per frame] of a fresh process, or None (why).
+    ``res``: (x, y) instead of the file's resolution."""
+    child = CHILD if res is None else CHILD.replace(
+        "out = []", f"scene.render.resolution_x, scene.render.resolution_y = {res}\nout = []")
     try:
-        proc = subprocess.run([sys.executable, "-c", CHILD, path, engine, str(samples),
-                               str(frames)], capture_output=True, text=True, timeout=TIMEOUT)
+        proc = subprocess.run([sys.executable, "-c", child, path, engine, str(samples),
+                               str(frames)], capture_output=True, text=True, timeout=TIMEOUT,
+                              env=NO_SHADER_CACHE)
     except subprocess.TimeoutExpired:
         return None, f"> {TIMEOUT:.0f} s"
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RENDER_TIMES ")]
@@ -133,18 +197,45 @@ def render(path, engine, samples, frames):
     return json.loads(line[0].split(" ", 1)[1]), ""
 
 
-def measure(args, paths):
+def reach_share(path):
+    """{lamp: share of the 320x180 frame in its reach, "any lamp": in some lamp's}."""
+    proc = subprocess.run([sys.executable, "-c", REACH_CHILD, path,
+                           path.replace(".blend", "_reach.exr")],
+                          capture_output=True, text=True, timeout=TIMEOUT)
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("REACH ")]
+    return json.loads(line[0].split(" ", 1)[1]) if line else None
+
+
+def measure_fixed(args, paths):
+    """16x16 1-sample Cycles frames (the fixed cost), --runs rounds; the culled files' reach."""
+    tags = [t for t in paths if not t.startswith("nocull") or int(t[6:]) in args.unculled]
+    tiny = {t: [] for t in tags}
+    for r in range(args.runs):
+        for t in tags:
+            times, why = render(paths[t], "CYCLES", 1, 1, res=(16, 16))
+            tiny[t].append(times[0] if times else None)
+            print(f"tiny round {r} {t}: {times or why}", flush=True)
+    reach = {t: reach_share(paths[t]) for t in tags if t.startswith("cull")}
+    print("reach", reach, flush=True)
+    return tiny, reach
+
+
+def measure(args, paths, phases=("cycles", "eevee"), old=None):
     cycles_tags = ["none"] + [f"cull{n}" for n in args.counts] + [f"nocull{n}"
                                                                  for n in args.unculled]
     eevee_tags = ["none"] + [f"cull{n}" for n in args.eevee]
     cyc = {t: [] for t in cycles_tags}
     eev = {t: [] for t in eevee_tags}
-    for r in range(args.runs):
+    if "cycles" not in phases:
+        cyc, cycles_tags = old["cycles"], []
+    if "eevee" not in phases:
+        eev, eevee_tags = old["eevee"], []
+    for r in range(args.runs if cycles_tags else 0):
         for t in cycles_tags:
             times, why = render(paths[t], "CYCLES", args.samples, 1)
             cyc[t].append(times[0] if times else None)
             print(f"cycles round {r} {t}: {times or why}", flush=True)
-    for r in range(args.eevee_runs):
+    for r in range(args.eevee_runs if eevee_tags else 0):
         for t in eevee_tags:
             times, why = render(paths[t], "BLENDER_EEVEE", 1, 2)
             eev[t].append(times)
@@ -157,7 +248,7 @@ def _med(xs):
     return statistics.median(xs) if xs else float("nan")
 
 
-def write(args, info, cyc, eev, meta):
+def write(args, info, cyc, eev, meta, tiny=None, reach=None):
     rows = []
     base = cyc["none"]
     loads = [x for v in cyc.values() for t in v if t for x in t[1:]]
@@ -200,9 +291,12 @@ def write(args, info, cyc, eev, meta):
         lines.append(f"| {name} | {n or '-'} | {terms} | {upd} | {_med(secs):.2f} | "
                      f"{min(secs):.2f}-{max(secs):.2f} | {_med(ratios):.2f} |")
         rows.append((name, n, _med(secs), _med(ratios)))
-    lines += ["", f"EEVEE (`BLENDER_EEVEE`, headless EGL), {RES[0]}x{RES[1]}, 1 sample, two frames "
-              f"per process, {args.eevee_runs} rounds.  Compile = first frame - the same round's "
-              "baseline first frame.", "",
+    el = [x for v in eev.values() for t in v if t for f in t for x in f[1:]]
+    lines += ["", f"EEVEE (`BLENDER_EEVEE`, headless EGL, Mesa llvmpipe, its disk shader cache "
+              f"off), {RES[0]}x{RES[1]}, 1 sample, two frames per process, "
+              f"{len(eev.get('none', []))} rounds (load {min(el, default=0):.1f}-"
+              f"{max(el, default=0):.1f}).  Compile = first frame - the same round's baseline "
+              "first frame.", "",
               "| configuration | spheres | 1st frame (s), median | 2nd frame (s), median | "
               "compile (s), median | min-max |", "|---|---:|---:|---:|---:|---:|"]
     eb = eev["none"]
@@ -217,9 +311,25 @@ def write(args, info, cyc, eev, meta):
                      f"{_med([t[0][0] for t in ok]):.1f} | {_med([t[1][0] for t in ok]):.1f} | "
                      + ("" if not n else f"{_med(comp):.1f} | {min(comp):.1f}-{max(comp):.1f}")
                      + (" | |" if not n else " |"))
+    if tiny:
+        tl = [x for v in tiny.values() for t in v if t for x in t[1:]]
+        lines += ["", "Fixed cost of a frame (scene sync and shader compilation): Cycles at "
+                  f"16x16, 1 sample, {args.runs} rounds (load {min(tl):.1f}-{max(tl):.1f}); the "
+                  "share of the 320x180 frame in reach (culled wiring: the pixels that evaluate "
+                  "the spheres of a lamp).", "",
+                  "| configuration | 16x16 frame (s), median | excess over baseline (s) | "
+                  "in reach of lamp A | of lamp B | of any lamp |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        b0 = _med([t[0] for t in tiny.get("none", []) if t])
+        for tag, v in tiny.items():
+            m = _med([t[0] for t in v if t])
+            sh = (reach or {}).get(tag) or {}
+            cells = [f"{100 * sh[k]:.1f} %" if k in sh else "" for k in
+                     ("Lamp A", "Lamp B", "any lamp")]
+            lines.append(f"| {tag} | {m:.2f} | {m - b0:+.2f} | " + " | ".join(cells) + " |")
     lines += ["", "Raw (seconds, load before, load after per render):", "", "```",
-              json.dumps({"cycles": cyc, "eevee": eev, "info": {str(k): v for k, v in
-                                                               info.items()}}), "```", ""]
+              json.dumps({"cycles": cyc, "eevee": eev, "tiny": tiny, "reach": reach,
+                          "info": {str(k): v for k, v in info.items()}}), "```", ""]
     if meta.get("note"):
         lines += [meta["note"], ""]
     lines += ["![render cost](moving_render.png)", "",
@@ -266,17 +376,35 @@ def main(argv=None):
     ap.add_argument("--eevee-runs", type=int, default=2)
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--note", default="")
+    ap.add_argument("--reuse", default="", help="a previous run's directory of .blend files")
+    ap.add_argument("--phases", default="cycles,eevee,tiny,reach")
     args = ap.parse_args(argv)
+    phases = set(args.phases.split(","))
     head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True).stdout.strip()
     meta = dict(when=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), head=head,
                 machine=f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
                 note=args.note)
-    tmp = tempfile.mkdtemp(prefix="relight_bench_moving_render_")
-    paths, info = build(args, tmp)
+    old = {}
+    if args.reuse:                      # the files and the figures of a previous run
+        paths = {os.path.splitext(f)[0]: os.path.join(args.reuse, f)
+                 for f in os.listdir(args.reuse) if f.endswith(".blend")}
+        with open(args.out) as f:
+            text = f.read()
+        old = json.loads(text.split("```\n", 1)[1].split("\n```", 1)[0])
+        info = {int(k): v for k, v in old["info"].items()}
+    else:
+        tmp = tempfile.mkdtemp(prefix="relight_bench_moving_render_")
+        paths, info = build(args, tmp)
     print("built", paths, info, flush=True)
-    cyc, eev = measure(args, paths)
-    write(args, info, cyc, eev, meta)
+    if phases & {"cycles", "eevee"}:
+        cyc, eev = measure(args, paths, phases, old)
+    else:
+        cyc, eev = old["cycles"], old["eevee"]
+    tiny, reach = old.get("tiny"), old.get("reach")
+    if phases & {"tiny", "reach"}:
+        tiny, reach = measure_fixed(args, paths)
+    write(args, info, cyc, eev, meta, tiny, reach)
     print("wrote", args.out)
 
 
