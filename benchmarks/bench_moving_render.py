@@ -70,6 +70,16 @@ scene = bpy.context.scene
 scene.render.engine = engine
 scene.cycles.samples = samples
 scene.eevee.taa_render_samples = samples
+if os.environ.get("BENCH_OUT_OF_REACH"):   # every point out of reach: Fac = (Reach > 2) = 0
+    for m in bpy.data.materials:
+        nt = m.node_tree
+        for n in list(nt.nodes) if nt else ():
+            if n.name.startswith("Relight Shadow Branch") and n.inputs["Fac"].is_linked:
+                g = nt.nodes.new("ShaderNodeMath")
+                g.operation = "GREATER_THAN"
+                g.inputs[1].default_value = 2.0
+                nt.links.new(n.inputs["Fac"].links[0].from_socket, g.inputs[0])
+                nt.links.new(g.outputs[0], n.inputs["Fac"])
 out = []
 for i in range(frames):
     load = os.getloadavg()[0]
@@ -180,7 +190,7 @@ def build(args, tmp):
     return paths, info_out
 
 
-def render(path, engine, samples, frames, res=None):
+def render(path, engine, samples, frames, res=None, out_of_reach=False):
     """[[seconds, load before, load after] per frame] of a fresh process, or None (why).
     ``res``: (x, y) instead of the file's resolution."""
     child = CHILD if res is None else CHILD.replace(
@@ -188,7 +198,8 @@ def render(path, engine, samples, frames, res=None):
     try:
         proc = subprocess.run([sys.executable, "-c", child, path, engine, str(samples),
                                str(frames)], capture_output=True, text=True, timeout=TIMEOUT,
-                              env=NO_SHADER_CACHE)
+                              env=dict(NO_SHADER_CACHE, BENCH_OUT_OF_REACH="1" if out_of_reach
+                                       else ""))
     except subprocess.TimeoutExpired:
         return None, f"> {TIMEOUT:.0f} s"
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RENDER_TIMES ")]
@@ -220,6 +231,22 @@ def measure_fixed(args, paths):
     return tiny, reach
 
 
+def measure_out_of_reach(args, paths):
+    """Cycles frames (as measure's) of the baseline, the culled files and the same with every
+    point taken out of reach (the Mix factors forced to 0 after the reach is computed): what
+    the points out of reach pay, --runs rounds in turn."""
+    tags = [t for t in ("none", *(f"cull{n}" for n in args.counts)) if t in paths]
+    out = {t: [] for t in tags}
+    out.update({f"{t} out of reach": [] for t in tags if t != "none"})
+    for r in range(args.runs):
+        for t in tags:
+            for oor in ((False,) if t == "none" else (False, True)):
+                times, why = render(paths[t], "CYCLES", args.samples, 1, out_of_reach=oor)
+                out[f"{t} out of reach" if oor else t].append(times[0] if times else None)
+                print(f"out-of-reach round {r} {t} {oor}: {times or why}", flush=True)
+    return out
+
+
 def measure(args, paths, phases=("cycles", "eevee"), old=None):
     cycles_tags = ["none"] + [f"cull{n}" for n in args.counts] + [f"nocull{n}"
                                                                  for n in args.unculled]
@@ -248,7 +275,7 @@ def _med(xs):
     return statistics.median(xs) if xs else float("nan")
 
 
-def write(args, info, cyc, eev, meta, tiny=None, reach=None):
+def write(args, info, cyc, eev, meta, tiny=None, reach=None, oor=None):
     rows = []
     base = cyc["none"]
     loads = [x for v in cyc.values() for t in v if t for x in t[1:]]
@@ -321,14 +348,29 @@ def write(args, info, cyc, eev, meta, tiny=None, reach=None):
                   "in reach of lamp A | of lamp B | of any lamp |",
                   "|---|---:|---:|---:|---:|---:|"]
         b0 = _med([t[0] for t in tiny.get("none", []) if t])
-        for tag, v in tiny.items():
+        def order(tag):
+            return (tag.startswith("nocull"), int("".join(filter(str.isdigit, tag)) or 0))
+        for tag, v in sorted(tiny.items(), key=lambda kv: order(kv[0])):
             m = _med([t[0] for t in v if t])
             sh = (reach or {}).get(tag) or {}
             cells = [f"{100 * sh[k]:.1f} %" if k in sh else "" for k in
                      ("Lamp A", "Lamp B", "any lamp")]
             lines.append(f"| {tag} | {m:.2f} | {m - b0:+.2f} | " + " | ".join(cells) + " |")
+    if oor:
+        ol = [x for v in oor.values() for t in v if t for x in t[1:]]
+        lines += ["", f"What the points out of reach pay: Cycles {RES[0]}x{RES[1]}, "
+                  f"{args.samples} samples, the culled files as rendered and with every point "
+                  "taken out of reach (the Mix Shaders' factors forced to 0 after the reach is "
+                  f"computed), {len(oor.get('none', []))} rounds in turn (load "
+                  f"{min(ol, default=0):.1f}-{max(ol, default=0):.1f}).", "",
+                  "| configuration | render (s), median | ratio to baseline (median) |",
+                  "|---|---:|---:|"]
+        for tag, v in oor.items():
+            ratios = [a[0] / b[0] for a, b in zip(v, oor["none"]) if a and b]
+            lines.append(f"| {tag} | {_med([t[0] for t in v if t]):.2f} | {_med(ratios):.2f} |")
     lines += ["", "Raw (seconds, load before, load after per render):", "", "```",
               json.dumps({"cycles": cyc, "eevee": eev, "tiny": tiny, "reach": reach,
+                          "out_of_reach": oor,
                           "info": {str(k): v for k, v in info.items()}}), "```", ""]
     if meta.get("note"):
         lines += [meta["note"], ""]
@@ -377,7 +419,7 @@ def main(argv=None):
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--note", default="")
     ap.add_argument("--reuse", default="", help="a previous run's directory of .blend files")
-    ap.add_argument("--phases", default="cycles,eevee,tiny,reach")
+    ap.add_argument("--phases", default="cycles,eevee,tiny,reach,outofreach")
     args = ap.parse_args(argv)
     phases = set(args.phases.split(","))
     head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
@@ -404,7 +446,10 @@ def main(argv=None):
     tiny, reach = old.get("tiny"), old.get("reach")
     if phases & {"tiny", "reach"}:
         tiny, reach = measure_fixed(args, paths)
-    write(args, info, cyc, eev, meta, tiny, reach)
+    oor = old.get("out_of_reach")
+    if "outofreach" in phases:
+        oor = measure_out_of_reach(args, paths)
+    write(args, info, cyc, eev, meta, tiny, reach, oor)
     print("wrote", args.out)
 
 

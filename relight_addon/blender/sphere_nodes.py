@@ -16,6 +16,11 @@ map image's alpha).  Nothing runs in Python at render time:
   running product and maximum so that Cycles evaluates one sphere after the other (side by
   side, their intermediate values overflowed its 255-float SVM stack beyond 16-24 spheres).
   Spheres are fitted once; the object's animation, drags and parenting move them.
+* Culling (what cannot shadow costs no sphere): each lamp term a moving object can darken is its
+  own Mix Shader closure on "Reach" (the objects' bounding spheres against the cone round the
+  lamp, sphere_shadow.may_shadow, and a direct part in the map there), which Cycles' SVM jumps
+  over where it is 0; a lamp whose map has no direct part anywhere gets no spheres.  EEVEE
+  evaluates both branches: there only the lamps dropped save time.
 
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
@@ -821,9 +826,11 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
     if tests > EEVEE_SPHERE_TESTS:
         warnings.append(
             f"Moving objects: {tests} sphere tests in every relit material ({len(lamps)} lamps x "
-            f"{tests // max(len(lamps), 1)} spheres); EEVEE may fail to compile that many "
-            f"(measured: {EEVEE_SPHERE_TESTS} compile, 512 do not) and Cycles renders slow "
-            "down with the count: lower the objects' Spheres")
+            f"{tests // max(len(lamps), 1)} spheres); EEVEE may take minutes to compile that "
+            f"many or fail (measured on 2 cores: {EEVEE_SPHERE_TESTS} took about 2 minutes, 512 "
+            "failed) and every Cycles frame takes longer to prepare and to shade with the count "
+            "(2 lamps x 128 spheres: some 7 s before the first sample): lower the objects' "
+            "Spheres")
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
             "settled": flag_group is not None, "settle_seconds": settled_s,
             "warnings": warnings}
