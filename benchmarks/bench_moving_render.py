@@ -442,7 +442,7 @@ def main(argv=None):
     if phases & {"cycles", "eevee"}:
         cyc, eev = measure(args, paths, phases, old)
     else:
-        cyc, eev = old["cycles"], old["eevee"]
+        cyc, eev = old.get("cycles", {"none": []}), old.get("eevee", {"none": []})
     tiny, reach = old.get("tiny"), old.get("reach")
     if phases & {"tiny", "reach"}:
         tiny, reach = measure_fixed(args, paths)
