@@ -105,6 +105,28 @@ def _bake(obj, mat):
     return px.reshape(BAKE, BAKE, 4)
 
 
+def _unshadowed_bake(obj, mat):
+    """The EMIT bake's first channel of ``mat`` without the moving objects' shadows: the shadow
+    factors ("S <lamp>" nodes' Scale) unlinked and the output fed by the material's own closure
+    (the one sphere_nodes replaced), then back."""
+    tree = mat.node_tree
+    surface = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                   and n.is_active_output).inputs["Surface"]
+    wired = surface.links[0].from_socket
+    factors = {}
+    for node in tree.nodes:
+        if node.name.startswith("S ") and node.inputs["Scale"].is_linked:
+            factors[node.name] = node.inputs["Scale"].links[0].from_socket
+            tree.links.remove(node.inputs["Scale"].links[0])
+    tree.links.new(tree.nodes[mat[_nodes().SURFACE_KEY]].outputs[0], surface)
+    try:
+        return _bake(obj, mat)[..., 0]
+    finally:
+        tree.links.new(wired, surface)
+        for name, src in factors.items():
+            tree.links.new(src, tree.nodes[name].inputs["Scale"])
+
+
 def _emit_material(name, source):
     """A material emitting what ``source(tree)`` returns (a socket)."""
     mat = bpy.data.materials.new(name)
@@ -166,12 +188,8 @@ def test_node_groups_match_their_numpy_twin(room):
                 lamps[other].data.energy = powers[other] if other == name else 0.0
             bpy.context.view_layer.update()
             shadowed = _bake(floor, mat)[..., 0].reshape(-1)
-            s_input = mat.node_tree.nodes[f"S {name}"].inputs["Scale"]
-            link = s_input.links[0]
-            src = link.from_socket
-            mat.node_tree.links.remove(link)
-            plain = _bake(floor, mat)[..., 0].reshape(-1)
-            mat.node_tree.links.new(src, s_input)
+            assert mat.node_tree.nodes[f"S {name}"].inputs["Scale"].is_linked
+            plain = _unshadowed_bake(floor, mat).reshape(-1)
             m_image = mat.node_tree.nodes[f"M {name}"].image
             assert _alpha(m_image).shape == (16, 16)
             a = _bake(floor, _alpha_material(m_image))[..., 0].reshape(-1)   # as shaded
@@ -274,6 +292,73 @@ def _camera_over_floor(size):
     # (its shadow is what is measured)
     for name in ("Box", "Monkey", "Ceiling"):
         bpy.data.objects[name].visible_camera = False
+
+
+SURFACES = ("Floor", "Ceiling", "WallXn", "WallYn", "Box")
+
+
+def test_culled_wiring_renders_as_the_unculled(room):
+    """The culling (issue 42 item 7) changes nothing a render shows: each lamp term's branch on
+    the objects' reach, and the lamps whose map has no direct part left without spheres.  Every
+    relit surface is baked by Cycles (EMIT) with the culled wiring and with the spheres evaluated
+    for every lamp at every shading point (``sync(cull=False)``), the object at two places; the
+    two agree within float noise, where the shadow itself is far from it."""
+    sn = _nodes()
+    scene = bpy.context.scene
+    monkey = room
+    start = tuple(monkey.location)
+    mats = {n: bpy.data.objects[n].material_slots[0].material for n in SURFACES}
+    lamps = sn.lamp_groups(sn.scene_key(scene))
+    # the downward lamps give the ceiling no direct light: no sphere is evaluated there
+    assert not sn.shadowed_terms(mats["Ceiling"], lamps)
+    assert len(sn.shadowed_terms(mats["Floor"], lamps)) == 2
+    assert len(sn.shadowed_terms(mats["Ceiling"], lamps, cull=False)) == 2
+    try:
+        for where in (start, (0.2, 0.6, 1.3)):        # the second above the box
+            monkey.location = where
+            bpy.context.view_layer.update()
+            baked = {}
+            for cull in (True, False):
+                sn.sync(scene, settle_shadows=False, cull=cull)
+                mixes = sum(n.bl_idname == "ShaderNodeMixShader"
+                            for m in mats.values() for n in m.node_tree.nodes)
+                assert (mixes > 0) == cull
+                baked[cull] = {n: _bake(bpy.data.objects[n], m)[..., :3] for n, m in mats.items()}
+            shadow = 0.0
+            for n, m in mats.items():
+                a, b = baked[True][n], baked[False][n]
+                assert np.all(np.isfinite(a)) and a.max() > 0
+                assert np.abs(a - b).max() <= 1e-5 + 1e-4 * b.max(), (where, n)
+                shadow = max(shadow, float(np.abs(a - _unshadowed(bpy.data.objects[n], m)).max()
+                                           / b.max()))
+            assert shadow > 0.2, where                 # the object does shadow something
+    finally:
+        monkey.location = start
+        bpy.context.view_layer.update()
+        sn.sync(scene, settle_shadows=False)
+
+
+def _unshadowed(obj, mat):
+    """The EMIT bake (RGB) of ``mat`` with its own closure on the output (no sphere shadow)."""
+    tree = mat.node_tree
+    surface = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                   and n.is_active_output).inputs["Surface"]
+    own = tree.nodes.get(mat.get(_nodes().SURFACE_KEY, ""))
+    if own is None or not surface.is_linked:
+        return _bake(obj, mat)[..., :3]
+    wired = surface.links[0].from_socket
+    tree.links.new(own.outputs[0], surface)
+    factors = {}
+    for node in tree.nodes:
+        if node.name.startswith("S ") and node.inputs["Scale"].is_linked:
+            factors[node.name] = node.inputs["Scale"].links[0].from_socket
+            tree.links.remove(node.inputs["Scale"].links[0])
+    try:
+        return _bake(obj, mat)[..., :3]
+    finally:
+        tree.links.new(wired, surface)
+        for name, src in factors.items():
+            tree.links.new(src, tree.nodes[name].inputs["Scale"])
 
 
 def test_keyframed_object_renders_its_moving_shadow_without_the_extension(room, tmp_path):
@@ -553,12 +638,7 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     bpy.context.view_layer.update()
     try:
         shadowed = _bake(floor, mat)[..., 0]
-        s_input = mat.node_tree.nodes["S LampA"].inputs["Scale"]
-        link = s_input.links[0]
-        src = link.from_socket
-        mat.node_tree.links.remove(link)
-        plain = _bake(floor, mat)[..., 0]
-        mat.node_tree.links.new(src, s_input)
+        plain = _unshadowed_bake(floor, mat)
         a = _bake(floor, _alpha_material(mat.node_tree.nodes["M LampA"].image))[..., 0]
 
         def colour(nt):                       # the settled image as the material samples it

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from relight_addon.core.relight.sphere_shadow import (
-    SUN_DISTANCE, cap_visibility, sphere_visibility, sun_disk, to_local)
+    SUN_DISTANCE, bounding_sphere, cap_visibility, may_shadow, sphere_visibility, sun_disk,
+    to_local, world_bound)
 from relight_addon.core.relight.spheres import fit_spheres, silhouette_sphere
 
 
@@ -383,3 +384,76 @@ def test_settled_images_are_dilated_across_uv_seams():
     far = ~cov & ~ring
     assert far.any() and np.all(img[far, 0] == 1.0)
     assert np.all(img[..., 1] == 1.0)
+
+
+# ------------------------------------------------------------------------------------------
+# (5) the reach test the relit materials branch on (sphere_nodes: out of reach, no sphere is
+#     evaluated and V is taken as 1)
+# ------------------------------------------------------------------------------------------
+
+def _random_set(rng, m):
+    centres = rng.normal(size=(m, 3)) * 0.3 + [0.0, 0.0, 1.0]
+    return centres, rng.uniform(0.02, 0.3, m)
+
+
+def test_bounding_sphere_holds_every_sphere():
+    rng = np.random.default_rng(3)
+    for m in (1, 2, 7, 64):
+        c, r = _random_set(rng, m)
+        mid, big = bounding_sphere(c, r)
+        assert np.all(np.linalg.norm(c - mid, axis=1) + r <= big)
+        assert big <= 1.01 * (np.linalg.norm(c - mid, axis=1) + r).max() + 1e-6   # not loose
+
+
+@pytest.mark.parametrize("lamp_radius", [0.0, 0.01, 0.3, 1.5])
+def test_out_of_reach_no_sphere_shadows(lamp_radius):
+    """Where may_shadow is False the twin's V is exactly 1 (what the materials show there) and
+    no ray from the point to the lamp's disk touches a sphere (Monte Carlo, analytic
+    ray-sphere tests); the test culls most of a room and keeps the whole shadow."""
+    rng = np.random.default_rng(int(lamp_radius * 100) + 11)
+    culled = shadowed = 0
+    for trial in range(40):
+        c, r = _random_set(rng, int(rng.integers(1, 24)))
+        bound = bounding_sphere(c, r)
+        p = np.column_stack([rng.uniform(-3, 3, 3000), rng.uniform(-3, 3, 3000),
+                             rng.uniform(-0.5, 2.5, 3000)])
+        lamp = rng.normal(size=3) * 1.5 + [0.0, 0.0, 3.0]
+        v = sphere_visibility(p, lamp, lamp_radius, c, r, hull=(bound[0], 0.7 * bound[1]))
+        out = ~may_shadow(p, lamp, lamp_radius, bound)
+        assert np.all(v[out] == 1.0)
+        culled += out.sum()
+        shadowed += (v < 1.0).sum()
+        if trial < 4 and lamp_radius > 0:            # the geometry itself, not the twin
+            for i in rng.choice(np.flatnonzero(out), min(40, int(out.sum())), replace=False):
+                for cj, rj in zip(c, r):
+                    assert mc_disk_visibility(p[i], lamp, lamp_radius, cj, rj, 200, rng) == 1.0
+    assert culled > 0.25 * 40 * 3000 and shadowed > 1000
+
+
+def test_reach_in_world_space_holds_the_object_frame_s_shadow():
+    """The materials test the reach in world space (world_bound) and evaluate the spheres in the
+    object's frame: rotated and unevenly scaled, every point the object's frame shadows passes."""
+    rng = np.random.default_rng(5)
+    culled = 0
+    for trial in range(30):
+        c, r = _random_set(rng, int(rng.integers(1, 16)))
+        bound = bounding_sphere(c, r)
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        w, x, y, z = q
+        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        scale = rng.uniform(0.3, 2.0, 3)
+        m = np.eye(4)
+        m[:3, :3] = rot * scale
+        m[:3, 3] = rng.normal(size=3)
+        p = rng.uniform(-4, 4, (3000, 3))
+        lamp, lamp_r = rng.normal(size=3) * 2 + [0, 0, 4.0], rng.choice([0.0, 0.2, 1.0])
+        v = sphere_visibility(to_local(p, m), to_local(lamp[None], m)[0],
+                              lamp_r / scale.mean(), c, r)
+        centre, radius, grow = world_bound(bound, m)
+        out = ~may_shadow(p, lamp, lamp_r * grow, (centre, radius))
+        assert np.all(v[out] == 1.0), trial
+        culled += out.sum()
+    assert culled > 0.3 * 30 * 3000

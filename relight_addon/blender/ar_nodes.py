@@ -459,7 +459,8 @@ def shadow_group(obj, spheres, hull, lights, key, image, bands, rows, fit_hash="
     # each light: the lamps' formula within the silhouette's part
     for j, (direction, angle, cap) in enumerate(lights):
         b.column(2)
-        lamp = dict(Position=p, To_Lamp=tuple(np.asarray(direction) * SUN_DISTANCE),
+        u = np.asarray(direction, float)
+        lamp = dict(Position=p, Direction=tuple(u / max(float(np.linalg.norm(u)), 1e-300)),
                     Lamp_Distance=SUN_DISTANCE, Lamp_Angle=angle, Lamp_Cap=cap)
         hp = group_node(b, lamp_cap, Centre=hull_w[0], Radius=hull_w[1], Product=1.0, Max=0.0,
                         Part=1.0, **lamp)

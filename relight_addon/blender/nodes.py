@@ -87,7 +87,8 @@ class Builder:
         return n.outputs["Result"]
 
     def one_minus_cos(self, s):
-        """1 - cos(asin s), as sphere_shadow._one_minus_cos (no cancellation for small caps)."""
+        """1 - cos(asin s) without its cancellation for small caps (as sphere_shadow.blocked_part's
+        s tan(asin(s) / 2))."""
         sq = self.math("MULTIPLY", s, s)
         root = self.math("SQRT", self.math("SUBTRACT", 1.0, sq))
         return self.math("DIVIDE", sq, self.math("ADD", 1.0, root))

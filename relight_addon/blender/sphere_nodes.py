@@ -16,6 +16,11 @@ map image's alpha).  Nothing runs in Python at render time:
   running product and maximum so that Cycles evaluates one sphere after the other (side by
   side, their intermediate values overflowed its 255-float SVM stack beyond 16-24 spheres).
   Spheres are fitted once; the object's animation, drags and parenting move them.
+* Culling (what cannot shadow costs no sphere): each lamp term a moving object can darken is its
+  own Mix Shader closure on "Reach" (the objects' bounding spheres against the cone round the
+  lamp, sphere_shadow.may_shadow, and a direct part in the map there), which Cycles' SVM jumps
+  over where it is 0; a lamp whose map has no direct part anywhere gets no spheres.  EEVEE
+  evaluates both branches: there only the lamps dropped save time.
 
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
@@ -38,24 +43,31 @@ import bpy
 import numpy as np
 
 from ..core.relight.settled import object_visibility, visibility_images
-from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE
+from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE, bounding_sphere
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
 from . import ids
 from .drivers import add_driver
-from .images import MapWriter
 from .ids import MAP_SOURCE, scene_key
+from .images import CONTENT, MapWriter
 from .nodes import Builder, new_group
 from .roles import DEFAULT_SPHERES, moving, moving_objects, sphere_count  # noqa: F401
-from .write import MAP_PREFIX, SHADOW_PREFIX
+from .write import MAP_PREFIX, SHADOW_PREFIX, T_NODE
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (own frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
+BOUND_KEY = "relight_sphere_bound"     # on a sphere group: x, y, z, radius of the bounding sphere
 CAP_KEY = "relight_sphere_cap"         # on the shared per-sphere group: its version
 WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is wired to
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
+SURFACE_KEY = "relight_sphere_surface" # on a relit material: the closure its output had before
+DIRECT_KEY = "relight_direct_max"      # on a map image: its largest alpha, for its content hash
+WIRING_VERSION = 3                     # of the material wiring (older wirings are made again)
+# A map whose direct part (alpha) stays below this everywhere gets no sphere shadow: dropping
+# it changes the lamp's term by at most this fraction (the half-float maps' own spacing is 1e-3).
+DIRECT_FLOOR = 1e-3
 SQRT_PI = float(np.sqrt(np.pi))
 SETTLED_KEY = "relight_settled"        # on a settled image: its channels' lamps; on the group:
 SETTLED_FITS = "relight_settled_fits"  # the objects' fit hashes it was computed for
@@ -73,6 +85,27 @@ EEVEE_SPHERE_TESTS = 128
 
 def _transform_vars(obj, what):
     return [(w.lower().replace("_", ""), "TRANSFORMS", obj, w) for w in what]
+
+
+def _frame_vars(obj):
+    """Location (l, m, n), rotation (w, x, y, z) and scale (a, b, c) of ``obj``, world space."""
+    return [(n, "TRANSFORMS", obj, w) for n, w in zip(
+        "lmnwxyzabc", ("LOC_X", "LOC_Y", "LOC_Z", "ROT_W", "ROT_X", "ROT_Y", "ROT_Z",
+                       "SCALE_X", "SCALE_Y", "SCALE_Z"))]
+
+
+def _world_point_expressions(point):
+    """Simple expressions (over _frame_vars) of the world position of ``point``, given in the
+    object's frame: location + rotation (scale x point), the rotation matrix of the unit
+    quaternion (w, x, y, z)."""
+    px, py, pz = (repr(float(v)) for v in point)
+    sx, sy, sz = f"a * {px}", f"b * {py}", f"c * {pz}"
+    return (f"l + (1 - 2 * (y * y + z * z)) * {sx} + 2 * (x * y - w * z) * {sy}"
+            f" + 2 * (x * z + w * y) * {sz}",
+            f"m + 2 * (x * y + w * z) * {sx} + (1 - 2 * (x * x + z * z)) * {sy}"
+            f" + 2 * (y * z - w * x) * {sz}",
+            f"n + 2 * (x * z - w * y) * {sx} + 2 * (y * z + w * x) * {sy}"
+            f" + (1 - 2 * (x * x + y * y)) * {sz}")
 
 
 # -- lamps -------------------------------------------------------------------------------------
@@ -172,27 +205,54 @@ def object_triangles(obj, depsgraph):
     return co.reshape(-1, 3).astype(np.float64)[tri.reshape(-1, 3)]
 
 
+GROUP_VERSION = 2                      # of the sphere groups (older ones are made again)
+
+
 def _fit_hash(tris, n):
     h = hashlib.sha1(np.ascontiguousarray(tris, np.float32).tobytes())
-    h.update(str(n).encode())
+    h.update(f"{n}:{GROUP_VERSION}".encode())
     return h.hexdigest()
 
 
 CAP_GROUP = "Relight Sphere Cap"
-CAP_VERSION = 1
+CAP_VERSION = 2
+
+
+def _clamped(socket):
+    socket.node.use_clamp = True
+    return socket
+
+
+def _map_range(b, value, from_min, from_max, to_min, to_max, smooth=False):
+    """A Map Range node (float): to_min + (to_max - to_min) x ramp((value - from_min) /
+    (from_max - from_min)), the ramp a smoothstep or a clamped line.  One node for what takes a
+    division, a clamp and a multiply-add in Math nodes."""
+    n = b.node("ShaderNodeMapRange", data_type="FLOAT",
+               interpolation_type="SMOOTHSTEP" if smooth else "LINEAR", clamp=not smooth)
+    for name, v in (("Value", value), ("From Min", from_min), ("From Max", from_max),
+                    ("To Min", to_min), ("To Max", to_max)):
+        if isinstance(v, (int, float)):
+            n.inputs[name].default_value = float(v)
+        else:
+            b.link(v, n.inputs[name])
+    return n.outputs["Result"]
 
 
 def cap_group(key, tree_type="ShaderNodeTree"):
-    """The shared node group of one sphere (sphere_shadow.cap_visibility's blocked part b, in
-    the object's frame): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b).
+    """The shared node group of one sphere (sphere_shadow.blocked_part's b, in the object's
+    frame, chained): Product' = Product (1 - min(b / Part, 1)), Max' = max(Max, b).
     ``tree_type``: a shader group, or the compositor's (AR mode)."""
     for ng in bpy.data.node_groups:
         if ng.get(CAP_KEY) == CAP_VERSION and ng.get(ids.SCENE_KEY) == key and \
                 ng.bl_idname == tree_type:
             return ng
+    for old in [ng for ng in bpy.data.node_groups if CAP_KEY in ng
+                and ng.get(ids.SCENE_KEY) == key and ng.bl_idname == tree_type
+                and ng.users <= 1]:
+        bpy.data.node_groups.remove(old)              # an older version nothing uses
     vec, flt = "NodeSocketVector", "NodeSocketFloat"
     ng, gin, gout = new_group(CAP_GROUP, [
-        ("Position", vec), ("To Lamp", vec), ("Lamp Distance", flt), ("Lamp Angle", flt),
+        ("Position", vec), ("Direction", vec), ("Lamp Distance", flt), ("Lamp Angle", flt),
         ("Lamp Cap", flt), ("Centre", vec), ("Radius", flt), ("Product", flt), ("Max", flt),
         ("Part", flt)], [("Product", flt), ("Max", flt)], key, tree_type)
     ng[CAP_KEY] = CAP_VERSION
@@ -204,34 +264,42 @@ def cap_group(key, tree_type="ShaderNodeTree"):
     ng.links.new(i["Centre"], c.node.inputs[2])
     to_c = b.vmath("SUBTRACT", c, i["Position"])
     d_c = b.vmath("LENGTH", to_c)
-    d_l, th_l = i["Lamp Distance"], i["Lamp Angle"]
-    cos_g = b.math("DIVIDE", b.vmath("DOT_PRODUCT", i["To Lamp"], to_c),
-                   b.math("MULTIPLY", d_l, d_c))
-    gamma = b.math("ARCCOSINE", b.math("MAXIMUM", b.math("MINIMUM", cos_g, 1.0), -1.0))
-    s_o = b.math("MINIMUM", b.math("DIVIDE", i["Radius"], d_c), 1.0)
+    cos_g = b.node("ShaderNodeClamp")           # acos's domain (EEVEE gives 0 outside it)
+    cos_g.inputs["Min"].default_value, cos_g.inputs["Max"].default_value = -1.0, 1.0
+    b.link(b.math("DIVIDE", b.vmath("DOT_PRODUCT", to_c, i["Direction"]), d_c),
+           cos_g.inputs["Value"])
+    gamma = b.math("ARCCOSINE", cos_g.outputs[0])
+    s_o = _clamped(b.math("DIVIDE", i["Radius"], d_c))
     th_o = b.math("ARCSINE", s_o)
-    ratio = b.math("MINIMUM", b.math("DIVIDE", b.one_minus_cos(s_o), i["Lamp Cap"]), 1.0)
-    width = b.math("MAXIMUM", b.math("MULTIPLY", b.math("MINIMUM", th_l, th_o), 2.0), EPS_ANGLE)
-    x = b.math("DIVIDE", b.math("SUBTRACT", b.math("ADD", th_l, th_o), gamma), width)
-    blocked = b.math("MULTIPLY", b.math("MULTIPLY", ratio, b.smoothstep(x)),
-                     b.math("LESS_THAN", d_c, d_l))
+    om_o = b.math("MULTIPLY", b.math("TANGENT", b.math("MULTIPLY", th_o, 0.5)), s_o)
+    # overlap / Omega_L, 0 for a sphere behind the lamp
+    ratio = _map_range(b, om_o, 0.0, i["Lamp Cap"], 0.0,
+                       b.math("LESS_THAN", d_c, i["Lamp Distance"]))
+    th_l = i["Lamp Angle"]
+    a = b.math("ADD", th_l, th_o)
+    held = b.math("MULTIPLY_ADD", b.math("MINIMUM", th_l, th_o), -2.0, a)
+    blocked = _map_range(b, gamma, a, held, 0.0, ratio, smooth=True)
     blocked = b.math("MAXIMUM", blocked, b.math("LESS_THAN", d_c, i["Radius"]))
-    share = b.math("MINIMUM", b.math("DIVIDE", blocked, i["Part"]), 1.0)
-    ng.links.new(b.math("MULTIPLY", i["Product"], b.math("SUBTRACT", 1.0, share)),
-                 gout.inputs["Product"])
+    keep = _map_range(b, blocked, 0.0, i["Part"], 1.0, 0.0)
+    ng.links.new(b.math("MULTIPLY", i["Product"], keep), gout.inputs["Product"])
     ng.links.new(b.math("MAXIMUM", i["Max"], blocked), gout.inputs["Max"])
     return ng
 
 
 def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
-    """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)."""
+    """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)
+    and whether the spheres' bounding sphere can hide any of it ("Reach", 0 or 1: where it is 0
+    the visibility is exactly 1, see sphere_shadow.may_shadow)."""
     ng, gin, gout = new_group(f"Relight Spheres {obj.name}",
                                [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
                                 ("Lamp Radius", "NodeSocketFloat")],
-                               [("Visibility", "NodeSocketFloat")], key)
+                               [("Visibility", "NodeSocketFloat"), ("Reach", "NodeSocketFloat")],
+                               key)
+    bound = bounding_sphere(centres, radii)
     ng[OBJECT_KEY] = obj.name
     ng[FIT_KEY] = fit_hash
     ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
+    ng[BOUND_KEY] = [*map(float, bound[0]), float(bound[1])]
     if hull is not None:
         ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
     b = Builder(ng)
@@ -258,24 +326,58 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
                     b.vmath("CROSS_PRODUCT", u.outputs[0], t))
         return b.vmath("MULTIPLY", r, inv.outputs[0])
 
+    # Reach, in world space (so that points out of reach never pay the transform below): the
+    # bounding sphere, carried by the object's transform and grown to its largest scale, against
+    # the cone round the lamp, grown by the largest over the mean scale (the spheres see the
+    # lamp with a radius over the mean scale): a superset of what the object's frame would
+    # test, see sphere_shadow.may_shadow and world_bound
+    pos_w = gin.outputs["Position"]
+    to_lw = b.vmath("SUBTRACT", gin.outputs["Lamp"], pos_w)
+    u_w = b.vmath("NORMALIZE", to_lw)
+    grow = tree.new("ShaderNodeValue")
+    add_driver(grow.outputs[0], "max(a, b, c) / max(d, 1e-9)",
+               [(n, "TRANSFORMS", obj, w) for n, w in zip("abcd", ("SCALE_X", "SCALE_Y",
+                                                                   "SCALE_Z", "SCALE_AVG"))])
+    sin_l = _clamped(b.math("DIVIDE", b.math("MULTIPLY", gin.outputs["Lamp Radius"],
+                                             grow.outputs[0]), b.vmath("LENGTH", to_lw)))
+    neg_sin = b.math("MULTIPLY", sin_l, -1.0)
+    cos_l = b.math("SQRT", b.math("MULTIPLY_ADD", sin_l, neg_sin, 1.0))
+    centre_w = tree.new("ShaderNodeCombineXYZ")
+    for i, expr in enumerate(_world_point_expressions(bound[0])):
+        add_driver(centre_w.inputs[i], expr, _frame_vars(obj))
+    radius_w = tree.new("ShaderNodeValue")
+    add_driver(radius_w.outputs[0], f"{float(bound[1])!r} * max(a, b, c)",
+               [(n, "TRANSFORMS", obj, w) for n, w in zip("abc", ("SCALE_X", "SCALE_Y",
+                                                                  "SCALE_Z"))])
+    to_b = b.vmath("SUBTRACT", centre_w.outputs[0], pos_w)
+    h = b.vmath("LENGTH", b.vmath("CROSS_PRODUCT", to_b, u_w))
+    off = b.math("MULTIPLY_ADD", b.vmath("DOT_PRODUCT", to_b, u_w), neg_sin,
+                 b.math("MULTIPLY", h, cos_l))
+    ng.links.new(b.math("LESS_THAN", off, radius_w.outputs[0]), gout.inputs["Reach"])
+    # the lamp's cap seen from the point, in the object's frame (sphere_shadow.lamp_cap)
     p = local(gin.outputs["Position"])
-    lamp = local(gin.outputs["Lamp"])
-    r_l = b.math("MULTIPLY", gin.outputs["Lamp Radius"], inv_avg.outputs[0])
-    to_l = b.vmath("SUBTRACT", lamp, p)
+    to_l = b.vmath("SUBTRACT", local(gin.outputs["Lamp"]), p)
     d_l = b.vmath("LENGTH", to_l)
-    s_l = b.math("MINIMUM", b.math("DIVIDE", r_l, d_l), 1.0)
-    th_l = b.math("ARCSINE", s_l)
-    om_l = b.math("MAXIMUM", b.one_minus_cos(s_l), 1e-30)
+    direction = b.vmath("NORMALIZE", to_l)
+    r_l = b.math("MULTIPLY", gin.outputs["Lamp Radius"], inv_avg.outputs[0])
+    th_l = b.math("MAXIMUM", b.math("ARCSINE", _clamped(b.math("DIVIDE", r_l, d_l))),
+                  0.5 * EPS_ANGLE)
+    half = b.math("SINE", b.math("MULTIPLY", th_l, 0.5))
+    om_l = b.math("MULTIPLY", b.math("MULTIPLY", half, half), 2.0)
     # One "Relight Sphere Cap" node per sphere, chained through the running product and
     # maximum: Cycles' SVM compiler generates every node whose inputs are ready, so spheres
     # that only depended on the shading point would all be evaluated at once and overflow its
     # stack (measured: black materials beyond 16-24 spheres); each cap waits for the previous.
+    # The chain starts from a 1 that depends on the lamp: identical nodes are merged by
+    # Cycles, and a first sphere shared by two lamps' groups would be evaluated outside both
+    # lamps' branches (see _wire_material).
     cap = cap_group(key)
+    one = b.math("GREATER_THAN", d_l, -1.0)
 
     def cap_node(centre, radius, product, maximum, part):
         g = b.node("ShaderNodeGroup")
         g.node_tree = cap
-        for name, sock in (("Position", p), ("To Lamp", to_l), ("Lamp Distance", d_l),
+        for name, sock in (("Position", p), ("Direction", direction), ("Lamp Distance", d_l),
                            ("Lamp Angle", th_l), ("Lamp Cap", om_l)):
             ng.links.new(sock, g.inputs[name])
         g.inputs["Centre"].default_value = [float(x) for x in centre]
@@ -288,14 +390,14 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
         return g
 
     if hull is not None:        # the part of the lamp the silhouette can hide
-        part = b.math("MAXIMUM", cap_node(hull[0], hull[1], 1.0, 0.0, 1.0).outputs["Max"], 1e-6)
+        part = b.math("MAXIMUM", cap_node(hull[0], hull[1], one, 0.0, 1.0).outputs["Max"], 1e-6)
     else:
         part = 1.0
-    product, maximum = 1.0, 0.0
+    product, maximum = one, 0.0
     for c, r in zip(centres, radii):
         g = cap_node(c, r, product, maximum, part)
         product, maximum = g.outputs["Product"], g.outputs["Max"]
-    if isinstance(product, float):
+    if isinstance(maximum, float):
         acc = b.math("ADD", 1.0, 0.0)
     else:                       # V = 1 - max(S (1 - product), max)
         lost = b.math("SUBTRACT", 1.0, product)
@@ -304,6 +406,12 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
         acc = b.math("SUBTRACT", 1.0, b.math("MAXIMUM", lost, maximum))
     ng.links.new(acc, gout.inputs["Visibility"])
     return ng
+
+
+def group_bound(ng):
+    """(centre, radius) of the bounding sphere a sphere group tests its Reach with."""
+    a = np.asarray(ng[BOUND_KEY], float)
+    return a[:3], float(a[3])
 
 
 def group_spheres(ng):
@@ -449,51 +557,140 @@ def _settled_channel(settled_images, m_node, lname):
     return None
 
 
-def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
+def direct_max(image) -> float:
+    """The largest direct part (alpha) of a map image, kept on the image with the content hash
+    it was read for (MapWriter tags each image with one)."""
+    if image is None:
+        return 1.0
+    digest = image.get(CONTENT, "")
+    kept = image.get(DIRECT_KEY)
+    if kept is not None and digest and kept.get("content") == digest:
+        return float(kept["max"])
+    px = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(px)
+    top = float(px[3::4].max(initial=0.0)) if image.channels == 4 else 1.0
+    if digest:
+        image[DIRECT_KEY] = {"content": digest, "max": top}
+    return top
+
+
+def shadowed_terms(mat, lamp_group_of, cull=True):
+    """The lamp terms of ``mat`` a moving object can darken: (lamp name, map node, shadow node)
+    of the lamps with a group (where the spheres see them from) whose map has a direct part
+    somewhere (above DIRECT_FLOOR).  Elsewhere the factor 1 - a (1 - V) is 1 within the floor,
+    wherever the object goes: a lamp behind a wall, a ceiling above downward lamps.  Without
+    ``cull``: every lamp with a group."""
+    return [(lname, m, s) for lname, m, s in _lamp_terms(mat)
+            if lname in lamp_group_of and (not cull or direct_max(m.image) > DIRECT_FLOOR)]
+
+
+def _surface_socket(tree):
+    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                and n.is_active_output), None)
+    return None if out is None else out.inputs["Surface"]
+
+
+def _unwire(mat):
+    """Take this module's nodes out of ``mat``: the shadow factors back to 1, the material's
+    own closure back on its output."""
+    tree = mat.node_tree
+    surface = _surface_socket(tree)
+    own = tree.nodes.get(mat.get(SURFACE_KEY, ""))
+    for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
+        tree.nodes.remove(node)
+    for _, _, s_node in _lamp_terms(mat):
+        for link in list(s_node.inputs["Scale"].links):
+            tree.links.remove(link)
+        s_node.inputs["Scale"].default_value = 1.0
+    if surface is not None and own is not None and not surface.is_linked:
+        tree.links.new(own.outputs[0], surface)
+
+
+def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
     """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
     (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
-    (settled group, settled images) or None."""
+    (settled group, settled images) or None.  ``cull`` False: every lamp term evaluates the
+    spheres at every shading point (the reach branch and the DIRECT_FLOOR test left out; what
+    the culled wiring is measured and tested against).
+
+    Each lamp k that a moving object can darken (shadowed_terms) gets its own closure,
+    Mix Shader(Reach_k, Emission(T x plain_k), Emission(T x term_k x (1 - a_k (1 - V_k)))), the
+    other lamps one Emission of their sum, all added; Reach_k = 1 where some object's bounding
+    sphere can hide a part of lamp k (sphere_shadow.may_shadow) and the map has a direct part
+    (a_k > 0); where it is 0 the factor 1 - a_k (1 - V_k) is exactly 1.  Cycles' SVM jumps over the branch a Mix Shader's 0 / 1 factor leaves out, with
+    the nodes only that branch uses, so a shading point out of every object's reach pays the
+    reach tests and not the spheres (EEVEE evaluates both branches).  Settled: the plain branch
+    holds the settled shadow and the reach is 0 while the objects stand where it was traced (a
+    constant factor: Cycles keeps only that branch)."""
     tree = mat.node_tree
     flag_group, settled_images = settled if settled is not None else (None, [])
-    signature = repr((sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
+    terms = shadowed_terms(mat, lamp_group_of, cull) if sphere_groups else []
+    signature = repr((WIRING_VERSION, cull, sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
+                      sorted(t[0] for t in terms),
                       None if flag_group is None else
                       (flag_group.get("relight_settled_run"),
-                       sorted(im.name for im in settled_images), sorted(lamp_group_of))))
+                       sorted(im.name for im in settled_images))))
     if mat.get(WIRING_KEY) == signature and all(
             getattr(n, "node_tree" if n.bl_idname == "ShaderNodeGroup" else "image") is not None
             for n in tree.nodes if n.name.startswith(NODE_PREFIX)
             and n.bl_idname in ("ShaderNodeGroup", "ShaderNodeTexImage")):
-        return 1 if sphere_groups else 0
+        return 1 if terms else 0
+    _unwire(mat)
     mat[WIRING_KEY] = signature
-    for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
-        tree.nodes.remove(node)
-    terms = _lamp_terms(mat)
-    for _, _, s_node in terms:
-        for link in list(s_node.inputs["Scale"].links):
-            tree.links.remove(link)
-        s_node.inputs["Scale"].default_value = 1.0
-    if not sphere_groups or not terms:
+    surface = _surface_socket(tree)
+    t_node = tree.nodes.get(T_NODE)
+    if not terms or surface is None or not surface.is_linked or t_node is None:
         return 0
+    own = surface.links[0].from_node
+    mat[SURFACE_KEY] = own.name
+    strength = own.inputs["Strength"].default_value if "Strength" in own.inputs else 1.0
     count = 0
 
-    def node(kind, label, loc):
+    def node(kind, label, loc, **props):
         nonlocal count
         n = tree.nodes.new(kind)
         count += 1
         n.name = n.label = f"{NODE_PREFIX} {label} {count}"
         n.location = loc
+        for k, v in props.items():
+            setattr(n, k, v)
         return n
 
-    x0 = min(t[2].location.x for t in terms) - 900
+    def math(op, a, b, label, loc):
+        n = node("ShaderNodeMath", label, loc, operation=op)
+        for sock, v in zip(n.inputs, (a, b)):
+            if isinstance(v, float):
+                sock.default_value = v
+            else:
+                tree.links.new(v, sock)
+        return n.outputs[0]
+
+    def emission(colour, label, loc):
+        """Emission of T x colour."""
+        mul = node("ShaderNodeVectorMath", f"{label} colour", loc, operation="MULTIPLY")
+        tree.links.new(t_node.outputs["Color"], mul.inputs[0])
+        tree.links.new(colour, mul.inputs[1])
+        emit = node("ShaderNodeEmission", label, (loc[0] + 160, loc[1]))
+        emit.inputs["Strength"].default_value = strength
+        tree.links.new(mul.outputs[0], emit.inputs["Color"])
+        return emit.outputs[0]
+
+    x0 = min(t[2].location.x for t in _lamp_terms(mat)) - 900
+    x1 = own.location.x
     geo = node("ShaderNodeNewGeometry", "Position", (x0, 200))
-    for j, (lname, m_node, s_node) in enumerate(terms):
-        lg = lamp_group_of.get(lname)
-        if lg is None:
-            continue
+    flag = still = None
+    if flag_group is not None:           # 1 while the objects stand where it was traced
+        flag = node("ShaderNodeGroup", "Settled", (x0, 400))
+        flag.node_tree = flag_group
+        flag = flag.outputs["Settled"]
+        still = math("SUBTRACT", 1.0, flag, "Moving", (x0 + 200, 400))
+    closures = []
+    wired = {t[0] for t in terms}
+    for lname, m_node, s_node in terms:
         y = s_node.location.y - 60
         lamp = node("ShaderNodeGroup", f"Lamp {lname}", (x0, y))
-        lamp.node_tree = lg
-        vis = None
+        lamp.node_tree = lamp_group_of[lname]
+        vis = reach = None
         for i, sg in enumerate(sphere_groups):
             g = node("ShaderNodeGroup", f"Spheres {sg[OBJECT_KEY]}", (x0 + 200, y - 120 * i))
             g.node_tree = sg
@@ -501,27 +698,32 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
             tree.links.new(lamp.outputs["Position"], g.inputs["Lamp"])
             tree.links.new(lamp.outputs["Radius"], g.inputs["Lamp Radius"])
             if vis is None:
-                vis = g.outputs[0]
+                vis, reach = g.outputs["Visibility"], g.outputs["Reach"]
             else:
-                mul = node("ShaderNodeMath", "Product", (x0 + 400, y - 120 * i))
-                mul.operation = "MULTIPLY"
-                tree.links.new(vis, mul.inputs[0])
-                tree.links.new(g.outputs[0], mul.inputs[1])
-                vis = mul.outputs[0]
-        if flag_group is not None:       # V + settled (V_exact - V)
-            flag = node("ShaderNodeGroup", "Settled", (x0 + 200, y + 120))
-            flag.node_tree = flag_group
+                vis = math("MULTIPLY", vis, g.outputs["Visibility"], "Product",
+                           (x0 + 400, y - 120 * i))
+                reach = math("MAXIMUM", reach, g.outputs["Reach"], "Reach",
+                             (x0 + 400, y - 120 * i - 60))
+        alpha = m_node.outputs["Alpha"]
+        # where the map has no direct part (a = 0: the lamp's real shadow, faces turned away)
+        # the factor below is exactly 1: those points are out of reach too
+        reach = math("MULTIPLY", reach, math("GREATER_THAN", alpha, 0.0, "Direct",
+                                              (x0 + 400, y + 60)), "Reach direct", (x0 + 480, y + 60))
+        # 1 - a (1 - V): only the direct part (the map's alpha) is shadowed
+        lost = math("MULTIPLY", alpha, math("SUBTRACT", 1.0, vis, "Lost", (x0 + 560, y)),
+                    "Direct part", (x0 + 700, y))
+        tree.links.new(math("SUBTRACT", 1.0, lost, "Factor", (x0 + 840, y)),
+                       s_node.inputs["Scale"])
+        term = s_node.inputs[0].links[0].from_socket
+        plain = term
+        if flag is not None:             # fac: in reach and moving; plain: the settled shadow
+            reach = math("MULTIPLY", reach, still, "Reach moving", (x0 + 560, y + 60))
             found = _settled_channel(settled_images, m_node, lname)
-            diff = node("ShaderNodeMath", "Settled difference", (x0 + 420, y + 120))
-            diff.operation = "SUBTRACT"
-            if found is None:               # nothing of this material in the objects' shadow
-                diff.inputs[0].default_value = 1.0
-            else:
+            if found is not None:
                 im, channel = found
-                tex = node("ShaderNodeTexImage", "Settled V", (x0 + 200, y + 300))
-                tex.image = im
-                tex.interpolation = m_node.interpolation
-                tex.extension = m_node.extension
+                tex = node("ShaderNodeTexImage", "Settled V", (x0 + 200, y + 300),
+                           image=im, interpolation=m_node.interpolation,
+                           extension=m_node.extension)
                 if m_node.inputs["Vector"].is_linked:
                     tree.links.new(m_node.inputs["Vector"].links[0].from_socket,
                                    tex.inputs["Vector"])
@@ -531,37 +733,53 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None):
                     sep = node("ShaderNodeSeparateColor", "Settled channels", (x0 + 320, y + 300))
                     tree.links.new(tex.outputs["Color"], sep.inputs[0])
                     exact = sep.outputs[channel]
-                tree.links.new(exact, diff.inputs[0])
-            tree.links.new(vis, diff.inputs[1])
-            step = node("ShaderNodeMath", "Settled step", (x0 + 480, y + 120))
-            step.operation = "MULTIPLY_ADD"
-            tree.links.new(diff.outputs[0], step.inputs[0])
-            tree.links.new(flag.outputs["Settled"], step.inputs[1])
-            tree.links.new(vis, step.inputs[2])
-            vis = step.outputs[0]
-        # 1 - a (1 - V): only the direct part (the map's alpha) is shadowed
-        lost = node("ShaderNodeMath", "Lost", (x0 + 560, y))
-        lost.operation = "SUBTRACT"
-        lost.inputs[0].default_value = 1.0
-        tree.links.new(vis, lost.inputs[1])
-        part = node("ShaderNodeMath", "Direct part", (x0 + 700, y))
-        part.operation = "MULTIPLY"
-        tree.links.new(m_node.outputs["Alpha"], part.inputs[0])
-        tree.links.new(lost.outputs[0], part.inputs[1])
-        keep = node("ShaderNodeMath", "Factor", (x0 + 840, y))
-        keep.operation = "SUBTRACT"
-        keep.inputs[0].default_value = 1.0
-        tree.links.new(part.outputs[0], keep.inputs[1])
-        tree.links.new(keep.outputs[0], s_node.inputs["Scale"])
+                lost_e = math("MULTIPLY", math("SUBTRACT", 1.0, exact, "Settled lost",
+                                                (x0 + 420, y + 180)),
+                              flag, "Settled lost now", (x0 + 560, y + 180))
+                lost_e = math("MULTIPLY", alpha, lost_e, "Settled direct part", (x0 + 700, y + 180))
+                f_e = math("SUBTRACT", 1.0, lost_e, "Settled factor", (x0 + 840, y + 180))
+                scaled = node("ShaderNodeVectorMath", "Settled term", (x0 + 980, y + 180),
+                              operation="SCALE")
+                tree.links.new(term, scaled.inputs[0])
+                tree.links.new(f_e, scaled.inputs["Scale"])
+                plain = scaled.outputs[0]
+        shadowed = emission(s_node.outputs[0], f"Shadowed {lname}", (x1, y - 60))
+        if not cull:                     # reach taken as 1: the spheres everywhere
+            reach = still
+        if reach is None:
+            closures.append(shadowed)
+            continue
+        mix = node("ShaderNodeMixShader", f"Branch {lname}", (x1 + 400, y))
+        tree.links.new(reach, mix.inputs["Fac"])
+        tree.links.new(emission(plain, f"Plain {lname}", (x1, y + 60)), mix.inputs[1])
+        tree.links.new(shadowed, mix.inputs[2])
+        closures.append(mix.outputs[0])
+    rest = [s for lname, _, s in _lamp_terms(mat) if lname not in wired]
+    if rest:                             # the lamps no moving object darkens: one emission
+        total = rest[0].outputs[0]
+        for k, s_node in enumerate(rest[1:]):
+            add = node("ShaderNodeVectorMath", "Unshadowed sum", (x1 - 200, 400 + 60 * k),
+                       operation="ADD")
+            tree.links.new(total, add.inputs[0])
+            tree.links.new(s_node.outputs[0], add.inputs[1])
+            total = add.outputs[0]
+        closures.insert(0, emission(total, "Unshadowed", (x1, 500)))
+    out = closures[0]
+    for k, c in enumerate(closures[1:]):
+        add = node("ShaderNodeAddShader", "Lamps", (x1 + 600, -120 * k))
+        tree.links.new(out, add.inputs[0])
+        tree.links.new(c, add.inputs[1])
+        out = add.outputs[0]
+    tree.links.new(out, surface)
     return 1
 
 
-def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dict:
+def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=True) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
     no longer moving, settle their shadows where they stand (with ``result``, the scene's last
     ShadowFreeResult; without it the settled shadows are kept while the objects' meshes are the
-    same), and wire every relit material.  Returns a summary."""
+    same), and wire every relit material (``cull``: see _wire_material).  Returns a summary."""
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
@@ -605,15 +823,17 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True) -> dic
     settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if ids.ours(m, key) and m.node_tree is not None]
-    wired = sum(_wire_material(m, lamps, wanted, settled) for m in mats)
+    wired = sum(_wire_material(m, lamps, wanted, settled, cull) for m in mats)
     tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
     warnings = []
     if tests > EEVEE_SPHERE_TESTS:
         warnings.append(
             f"Moving objects: {tests} sphere tests in every relit material ({len(lamps)} lamps x "
-            f"{tests // max(len(lamps), 1)} spheres); EEVEE may fail to compile that many "
-            f"(measured: {EEVEE_SPHERE_TESTS} compile, 512 do not) and Cycles renders slow "
-            "down with the count: lower the objects' Spheres")
+            f"{tests // max(len(lamps), 1)} spheres); EEVEE may take minutes to compile that "
+            f"many or fail (measured on 2 cores: {EEVEE_SPHERE_TESTS} took about 2 minutes, 512 "
+            "failed) and every Cycles frame takes longer to prepare and to shade with the count "
+            "(2 lamps x 128 spheres: some 7 s before the first sample): lower the objects' "
+            "Spheres")
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
             "settled": flag_group is not None, "settle_seconds": settled_s,
             "warnings": warnings}

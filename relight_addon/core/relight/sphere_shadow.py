@@ -27,6 +27,7 @@ import numpy as np
 
 EPS_ANGLE = 1e-4          # smallest penumbra width (rad): a point lamp gets a hard edge
 SUN_DISTANCE = 1.0e5      # a sun is a disk this far away along its direction (metres)
+BOUND_SLACK = 1e-4        # relative growth of the bounding sphere: float32 rounding never culls
 
 
 def smoothstep(x):
@@ -34,33 +35,40 @@ def smoothstep(x):
     return x * x * (3.0 - 2.0 * x)
 
 
-def _one_minus_cos(s):
-    """1 - cos(asin s) without the cancellation of 1 - cos for small caps (float32 in shaders)."""
-    sq = s * s
-    return sq / (1.0 + np.sqrt(np.maximum(1.0 - sq, 0.0)))
+def lamp_cap(points, lamp_pos, lamp_radius):
+    """(unit vectors (n, 3) towards the lamp, distances (n,), half-angles (n,), Omega / 2 pi
+    (n,)) of the lamp seen from ``points``.  The half-angle is at least EPS_ANGLE / 2: a point
+    lamp is a cap that small (its umbra's edge is EPS_ANGLE wide), which keeps every ratio below
+    finite."""
+    p = np.asarray(points, float)
+    to_l = np.asarray(lamp_pos, float) - p
+    d_l = np.maximum(np.linalg.norm(to_l, axis=-1), 1e-12)
+    th_l = np.maximum(np.arcsin(np.minimum(lamp_radius / d_l, 1.0)), 0.5 * EPS_ANGLE)
+    om_l = 2.0 * np.sin(0.5 * th_l) ** 2                  # 1 - cos, without its cancellation
+    return to_l / d_l[..., None], d_l, th_l, om_l
+
+
+def blocked_part(points, lamp, centre, radius):
+    """The part (n,) of the lamp (``lamp_cap``'s tuple) that one sphere hides from ``points``."""
+    u, d_l, th_l, om_l = lamp
+    to_c = np.asarray(centre, float) - np.asarray(points, float)
+    d_c = np.maximum(np.linalg.norm(to_c, axis=-1), 1e-12)
+    gamma = np.arccos(np.clip(np.sum(to_c * u, axis=-1) / d_c, -1.0, 1.0))
+    s_o = np.minimum(radius / d_c, 1.0)
+    th_o = np.arcsin(s_o)
+    om_o = s_o * np.tan(0.5 * th_o)                       # 1 - cos, without its cancellation
+    ratio = np.minimum(om_o / om_l, 1.0) * (d_c < d_l)    # overlap / Omega_L; none behind the lamp
+    a = th_l + th_o                                       # the caps touch at gamma = a ...
+    width = 2.0 * np.minimum(th_l, th_o)                  # ... and one holds the other at a - width
+    x = np.where(width > 0, (a - gamma) / np.where(width > 0, width, 1.0), 0.0)
+    return np.maximum(ratio * smoothstep(x), (d_c < radius).astype(float))   # inside: all
 
 
 def cap_visibility(points, lamp_pos, lamp_radius, centre, radius):
     """Fraction (n,) of the lamp (a disk of ``lamp_radius`` at ``lamp_pos``, each (3,) or
     (n, 3)) seen from ``points`` (n, 3) past one sphere (``centre`` (3,), ``radius``)."""
-    p = np.asarray(points, float)
-    to_l = np.asarray(lamp_pos, float) - p
-    to_c = np.asarray(centre, float) - p
-    d_l = np.maximum(np.linalg.norm(to_l, axis=-1), 1e-12)
-    d_c = np.maximum(np.linalg.norm(to_c, axis=-1), 1e-12)
-    cos_g = np.clip(np.sum(to_l * to_c, axis=-1) / (d_l * d_c), -1.0, 1.0)
-    gamma = np.arccos(cos_g)
-    s_l = np.minimum(lamp_radius / d_l, 1.0)
-    s_o = np.minimum(radius / d_c, 1.0)
-    th_l, th_o = np.arcsin(s_l), np.arcsin(s_o)
-    om_l, om_o = _one_minus_cos(s_l), _one_minus_cos(s_o)      # Omega / 2 pi
-    width = np.maximum(2.0 * np.minimum(th_l, th_o), EPS_ANGLE)
-    # overlap / Omega_L, written so that a point lamp (Omega_L = 0) takes its limit
-    blocked = (np.minimum(om_o / np.maximum(om_l, 1e-30), 1.0)
-               * smoothstep((th_l + th_o - gamma) / width))
-    blocked = np.where(d_c < d_l, blocked, 0.0)          # a sphere behind the lamp
-    blocked = np.where(d_c < radius, 1.0, blocked)       # a receiver inside the object
-    return np.clip(1.0 - blocked, 0.0, 1.0)
+    lamp = lamp_cap(points, lamp_pos, lamp_radius)
+    return np.clip(1.0 - blocked_part(points, lamp, centre, radius), 0.0, 1.0)
 
 
 def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull=None):
@@ -75,11 +83,11 @@ def sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull=None):
     is 0 or 1 and the rule is the larger of the max and the product.  One pass over the spheres
     (a running product and maximum), as the node groups evaluate it."""
     centres, radii = np.asarray(centres, float), np.asarray(radii, float)
+    lamp = lamp_cap(points, lamp_pos, lamp_radius)
     part = None
     if hull is not None:
-        part = 1.0 - cap_visibility(points, lamp_pos, lamp_radius, hull[0], hull[1])
-    blocked = (1.0 - cap_visibility(points, lamp_pos, lamp_radius, c, r)
-               for c, r in zip(centres, radii))
+        part = blocked_part(points, lamp, hull[0], hull[1])
+    blocked = (blocked_part(points, lamp, c, r) for c, r in zip(centres, radii))
     return combined_visibility(blocked, len(points), part)
 
 
@@ -99,6 +107,47 @@ def combined_visibility(blocked, n, part=None):
     if not hull:
         return np.clip(product, 0.0, 1.0)
     return np.clip(1.0 - np.maximum(part * (1.0 - product), maximum), 0.0, 1.0)
+
+
+def bounding_sphere(centres, radii):
+    """(centre (3,), radius) of a sphere holding every sphere of the set: centred on the middle
+    of the centres' bounding box, grown by BOUND_SLACK."""
+    c, r = np.asarray(centres, float).reshape(-1, 3), np.asarray(radii, float).reshape(-1)
+    mid = 0.5 * (c.min(axis=0) + c.max(axis=0))
+    reach = float((np.linalg.norm(c - mid, axis=1) + r).max())
+    return mid, reach * (1.0 + BOUND_SLACK) + 1e-9
+
+
+def may_shadow(points, lamp_pos, lamp_radius, bound):
+    """Whether (n,) a sphere of the set inside ``bound`` = (centre, radius) can hide a part of
+    the lamp from ``points``: False only where the bound's cap misses the lamp's cap, and then
+    every sphere's blocked part is 0 and sphere_visibility gives exactly 1.
+
+    The test is the sphere against the cone from the point round the lamp (half-angle theta_L):
+    h cos theta_L - t sin theta_L < R, with t and h the bound's centre along and off the axis
+    (d sin(gamma - theta_L) < d sin theta_O, i.e. gamma < theta_L + theta_O): no inverse
+    trigonometry, no division.  It also passes, needlessly, for some points that have the
+    object right behind them (gamma - theta_L beyond 90 degrees), and the lamp's distance is not
+    tested (a bound beyond the lamp passes too): both only cost render time.  A point inside the
+    bound passes (h cos - t sin = d sin(gamma - theta_L) <= d < R)."""
+    u, _, th_l, _ = lamp_cap(points, lamp_pos, lamp_radius)
+    to_b = np.asarray(bound[0], float) - np.asarray(points, float)
+    t = np.sum(to_b * u, axis=-1)
+    h = np.linalg.norm(np.cross(to_b, u), axis=-1)
+    return h * np.cos(th_l) - t * np.sin(th_l) < bound[1]
+
+
+def world_bound(bound, matrix):
+    """(centre, radius, lamp growth) in world space for a ``bound`` (centre, radius) given in the
+    frame of the 4x4 ``matrix``: the centre carried, the radius times the largest scale, and the
+    factor (largest / mean scale) by which may_shadow must grow the lamp's radius.  The spheres
+    are evaluated in the object's frame, where the lamp's radius is divided by the mean scale:
+    mapped to the world, that frame's spheres and lamp are ellipsoids inside these spheres, so
+    may_shadow in world space with them passes wherever it passes in the object's frame."""
+    m = np.asarray(matrix, float)
+    scale = np.linalg.norm(m[:3, :3], axis=0)
+    centre = m[:3, :3] @ np.asarray(bound[0], float) + m[:3, 3]
+    return centre, float(bound[1] * scale.max()), float(scale.max() / max(scale.mean(), 1e-12))
 
 
 def sun_disk(direction, angle):
