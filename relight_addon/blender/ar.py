@@ -33,7 +33,7 @@ from . import ar_nodes, ar_read, ar_write, ids
 from .images import MapWriter
 from .pipeline import Outcome
 
-STATE = "relight_ar"
+STATE = ids.AR_STATE
 _LIGHTING = {}           # env hash -> EnvironmentLighting prepared in this session
 LIGHTINGS_KEPT = 3       # maps kept in memory (about 30 MB each)
 _FITS = {}               # fit hash -> (centres, radii, hull) fitted in this session

@@ -18,6 +18,7 @@ SCENE_KEY = "relight_scene"          # the key of the scene it was made for
 SCENE_ID = "relight_id"              # its key
 SCENE_OWNER = "relight_id_owner"     # the name it had when the key was made
 STATUS = "relight_status"            # the last precompute's status (state.py)
+AR_STATE = "relight_ar"              # AR mode's set-up on a scene, and on its images (ar.py)
 # the kept solution (state.py): a leading underscore keeps them out of the Custom Properties
 # panel, which would list a multi-megabyte array
 KEPT_HEADER = "_relight_kept"           # JSON: run id, version, the arrays' table

@@ -221,7 +221,7 @@ def prepare(context, kind="update", preset=None, correction=None) -> Job:
     from ..core.fingerprint import scene_parts
     from ..core.scene import SceneError
     scene = context.scene
-    if kind == "update":                  # a scene set up for AR: Update refreshes AR (ar.py)
+    if kind == "update" and ids.AR_STATE in scene:    # set up for AR: Update refreshes AR
         from . import ar
         if ar.is_set_up(scene):
             return ar.prepare(context, "update")

@@ -14,6 +14,7 @@ maps, and the solution that Update starts from.
 """
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import uuid
@@ -284,9 +285,15 @@ def _limit_bytes():
 
 def _warm_up():
     """Import what an Update reads a kept solution with (scipy, the core's solver and
-    relighting: seconds on a cold start), so that the first Update after opening a relit file
-    takes about what the next ones take."""
-    from ..core.relight import object_change, shadowfree, virtual  # noqa: F401
+    relighting, OpenCV for the seams, Embree: seconds on a cold start), so that the first Update
+    after opening a relit file takes about what the next ones take."""
+    from ..core import fingerprint, persist  # noqa: F401
+    from ..core.relight import diagnose, object_change, shadowfree, virtual  # noqa: F401
+    for name in ("cv2", "embreex.rtcore_scene", "embreex.mesh_construction"):
+        try:
+            importlib.import_module(name)
+        except ImportError:                  # a fallback is used (mapping.py, raycast.py)
+            pass
 
 
 @persistent
