@@ -37,14 +37,6 @@ class RELIGHT_OT_ar_setup(_PipelineRunner, bpy.types.Operator):
             self.report({'ERROR'}, str(ex))
             return None
 
-    def execute(self, context):
-        job = self._prepare(context)
-        return {'CANCELLED'} if job is None else self._now(context, job)
-
-    def invoke(self, context, event):
-        job = self._prepare(context)
-        return {'CANCELLED'} if job is None else self._start(context, job)
-
 
 class RELIGHT_OT_ar_clear(RelightOperator, bpy.types.Operator):
     """Undo Set Up AR: the receivers' own materials, the compositor, the view layer's passes

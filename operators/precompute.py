@@ -128,6 +128,18 @@ class _PipelineRunner(RelightOperator):
     def disabled_reason(cls, context):
         return busy_reason()
 
+    def _arguments(self):
+        """What ``_prepare`` takes beside the context (Precompute: its preset and removal)."""
+        return ()
+
+    def execute(self, context):
+        job = self._prepare(context, *self._arguments())
+        return {'CANCELLED'} if job is None else self._now(context, job)
+
+    def invoke(self, context, event):
+        job = self._prepare(context, *self._arguments())
+        return {'CANCELLED'} if job is None else self._start(context, job)
+
     def _prepare(self, context, preset=None, correction=None):
         pipeline = _pipeline()
         try:
@@ -228,13 +240,8 @@ class RELIGHT_OT_precompute(_PipelineRunner, bpy.types.Operator):
                              description="How the photographed shadows of the real lamps are "
                                          "removed from the textures")
 
-    def execute(self, context):
-        job = self._prepare(context, self.preset, self.correction)
-        return {'CANCELLED'} if job is None else self._now(context, job)
-
-    def invoke(self, context, event):
-        job = self._prepare(context, self.preset, self.correction)
-        return {'CANCELLED'} if job is None else self._start(context, job)
+    def _arguments(self):
+        return self.preset, self.correction
 
 
 class RELIGHT_OT_update(_PipelineRunner, bpy.types.Operator):
@@ -247,14 +254,6 @@ class RELIGHT_OT_update(_PipelineRunner, bpy.types.Operator):
     bl_label = "Update"
     bl_options = {'UNDO'}
     _kind = "update"
-
-    def execute(self, context):
-        job = self._prepare(context)
-        return {'CANCELLED'} if job is None else self._now(context, job)
-
-    def invoke(self, context, event):
-        job = self._prepare(context)
-        return {'CANCELLED'} if job is None else self._start(context, job)
 
 
 class RELIGHT_OT_restore_originals(RelightOperator, bpy.types.Operator):
