@@ -13,7 +13,6 @@ Usage: python benchmarks/bench_capture.py [--only calibration,pose,path,hdr,env,
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import os
 import re
@@ -40,14 +39,6 @@ def _cv2():
 # Calibration and corners
 # ------------------------------------------------------------------------------------------
 
-def _plain(dets):
-    out = {}
-    for k, d in dets.items():
-        p = copy.copy(d)
-        p.corners = d.raw
-        out[k] = p
-    return out
-
 
 def _calib_errors(calib, K):
     k = calib.camera_matrix
@@ -71,7 +62,8 @@ def calibration():
         K = np.array(truth["K"][0])
         imgs = truth.get("images") or [cv2.imread(p, cv2.IMREAD_GRAYSCALE) for p in truth["paths"]]
         dets = {os.path.basename(p): det.detect(im) for p, im in zip(truth["paths"], imgs)}
-        for label, dd in (("ours (re-refined)", dets), ("plain OpenCV", _plain(dets))):
+        for label, dd in (("ours (re-refined)", dets),
+                          ("plain OpenCV", sc.plain_detections(dets))):
             c = cal.calibrate(dd, (640, 480), spec, flags=cv2.CALIB_FIX_K3)
             row = dict(model=model, method=label, **_calib_errors(c, K))
             if model == "D":
@@ -96,7 +88,7 @@ def calibration():
                         x = x + rng.normal(0, noise, x.shape)
                     out[os.path.basename(p)] = np.clip(np.rint(x), 0, 255).astype(np.uint8)
                 dd = {k: det.detect(v) for k, v in out.items()}
-                for label, d2 in (("ours", dd), ("plain", _plain(dd))):
+                for label, d2 in (("ours", dd), ("plain", sc.plain_detections(dd))):
                     c = cal.calibrate(d2, (640, 480), spec, flags=cv2.CALIB_FIX_K3)
                     e = [d.corners - _truth_corners(truth, i, spec)[d.ids]
                          for i, d in enumerate(d2.values())]
@@ -151,7 +143,7 @@ def pose():
         d = det.detect(cv2.imread(path, cv2.IMREAD_GRAYSCALE))
         K = np.array(truth["K"][i])
         m = np.array(truth["matrix_world"][i])
-        for label, dd in (("ours", d), ("plain", _plain({0: d})[0])):
+        for label, dd in (("ours", d), ("plain", sc.plain_detections({0: d})[0])):
             err = _pose_error(frame, ps.board_pose(dd, spec, K, np.zeros(5)), m)
             out.setdefault((truth["distance"][i], label), []).append(err)
     rows = []

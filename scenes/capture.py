@@ -21,6 +21,7 @@ the images.
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import os
@@ -738,3 +739,14 @@ def path_views():
 def pose_path_set(samples=16):
     """Renders of the pose board along path_views (640 x 480), for the path smoothing."""
     return render_board_views(board_spec(POSE_BOARD), path_views(), samples=samples, name="path")
+
+
+def plain_detections(dets):
+    """The same board detections with CharucoDetector's own corners (plain OpenCV), beside
+    ours re-refined: what the benchmark and the tests compare against."""
+    out = {}
+    for k, d in dets.items():
+        p = copy.copy(d)
+        p.corners = d.raw
+        out[k] = p
+    return out

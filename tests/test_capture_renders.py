@@ -7,7 +7,6 @@ The issue's targets, each camera model: reprojection RMS <= 0.1 px, focal length
 error <= 2 mm at 1, 2 and 3 m.  Slow on a cold cache (72 calibration renders of 640 x 480 and
 12 pose renders of 1280 x 960, about 8 minutes of one core); seconds once cached.
 """
-import copy
 import os
 
 import numpy as np
@@ -35,15 +34,6 @@ def _detections(truth, images=None):
                                               for p in truth["paths"]]
     return {os.path.basename(p): det.detect(im) for p, im in zip(truth["paths"], imgs)}
 
-
-def _plain(dets):
-    """The same detections with CharucoDetector's own corners (plain OpenCV)."""
-    out = {}
-    for k, d in dets.items():
-        p = copy.copy(d)
-        p.corners = d.raw
-        out[k] = p
-    return out
 
 
 def _errors(calib, K):
@@ -128,7 +118,7 @@ def test_better_than_plain_opencv():
         K = np.array(truth["K"][0])
         dets = _detections(truth)
         a = cal.calibrate(dets, (640, 480), SPEC, flags=FLAGS)
-        b = cal.calibrate(_plain(dets), (640, 480), SPEC, flags=FLAGS)
+        b = cal.calibrate(sc.plain_detections(dets), (640, 480), SPEC, flags=FLAGS)
         ours.append((a.rms,) + _errors(a, K))
         plain.append((b.rms,) + _errors(b, K))
     ours, plain = np.array(ours), np.array(plain)
