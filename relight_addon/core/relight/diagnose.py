@@ -23,7 +23,7 @@ import numpy as np
 from ..numerics import nonzero, safe_div
 from ..texture.colour import luminance
 from .albedo import RHO_ESTIMATE_MAX
-from .enclosure import enclosing_group
+from .enclosure import enclosed_lamps
 
 CLIPPED_SHARE = 0.05
 OFF_FACTOR = 2.0
@@ -103,37 +103,6 @@ def lamp_clearance(scene, lamp):
         return np.inf
     return min(float(_point_triangle_distance(np.asarray(p, float), tris).min()) for p in pts) \
         - radius
-
-
-def _lamp_points(scene, lamp):
-    """Where lamp ``lamp`` emits from: its light's centre, or its patches' centres."""
-    lights = scene.lights
-    pts = [lights.position[i] for i in np.flatnonzero(lights.lamp == lamp)
-           if lights.kind[i] != 2]                                      # (a sun is outside)
-    sel = np.flatnonzero(scene.lamp == lamp)
-    if len(sel):
-        _, normal = scene.area_normal()
-        c = scene.corners[sel].mean(axis=1)
-        pts += list(c + 1e-4 * normal[sel])
-    return pts
-
-
-def enclosed_lamps(scene, occluder):
-    """{lamp: group of the closed object it is inside} (not the room the camera is in)."""
-    from ..geometry.extent import bounding_diagonal
-    out = {}
-    camera = None
-    if scene.viewpoint is not None:
-        camera = enclosing_group(scene, occluder, scene.viewpoint)
-    for k in range(scene.n_lamps):
-        pts = _lamp_points(scene, k)
-        if not pts:
-            continue
-        g = enclosing_group(scene, occluder, pts[0])
-        if g is not None and g != camera and \
-                bounding_diagonal(scene.corners[np.asarray(scene.group) == g]) > 0:
-            out[k] = g
-    return out
 
 
 def diagnose(result, use_patch, group_names=str) -> list:

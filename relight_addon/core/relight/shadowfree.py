@@ -42,6 +42,7 @@ from ..scene import SceneData
 from ..texture.colour import luminance
 from ..texture.mapping import patch_means, rasterize_patches, texel_elements, vertex_interpolate
 from .albedo import albedo_rounds, estimate_reflectance
+from .enclosure import dark_inside
 from .exitance import fit_lamps, photo_misfit
 from .orient import orient
 from .maps import (clipped_ratio, map_images, maps_from,
@@ -181,6 +182,7 @@ def _shadow_free(scene, opt, occluder, reuse):
     stage = _Stage(timings)
     if occluder == "auto":
         occluder = scene.make_occluder()
+    scene = dark_inside(scene, occluder)
     run = _read(scene, opt, occluder, reuse, stage, timings)
     _initialise(run, reuse)
     if opt.mode == "none":
@@ -289,7 +291,7 @@ def _initialise(run: _Run, reuse):
         lamp_view = {}
         if proxy is not None:
             quality = quality.with_(contact_levels=0)
-            lamp_view = _proxy_lamp_view(proxy, run.occluder)
+            lamp_view = proxy_lamp_view(proxy, run.occluder)
         with scope(0.05, 0.4):
             sol = solve_radiosity(scene1, quality, occluder=run.rad_occluder, seed=opt.seed,
                                   **lamp_view)
@@ -415,7 +417,7 @@ def _fresh_solution(run: _Run, t_final, white):
     return sol
 
 
-def _proxy_lamp_view(proxy, occluder):
+def proxy_lamp_view(proxy, occluder):
     """How a proxy's leaves see the lights (sun, point, spot): against the full mesh, from
     above its bumps and the proxy's distance to it.  The proxy's own triangles let light
     through where the decimation moved a border: on family room 3's scan (100k triangles),
