@@ -285,32 +285,11 @@ def env():
 # Projection and relighting
 # ------------------------------------------------------------------------------------------
 
-def _office_projection(texture_size=48):
-    import importlib
-    import bpy
-    from relight_addon.core.capture import projection
-    from scenes import capture as sc
-    from scenes.addon import register_repo_addon
-    register_repo_addon()
-    paths, info = sc.office_photos(texture_size=texture_size)
-    bridge = importlib.import_module("relight_ext.relight_addon.blender.capture")
-    ops = importlib.import_module("relight_ext.operators.capture")
-    views, _ = ops.RELIGHT_OT_project_photos._views(None, bpy.context)
-    dg = bpy.context.evaluated_depsgraph_get()
-    targets = []
-    for name in info.objects:
-        tris, uvs = bridge.mesh_triangles(bpy.data.objects[name], dg, "UVMap")
-        targets.append(projection.Target(name, tris, uvs, (texture_size, texture_size)))
-    tris, owners = bridge.scene_triangles(dg)
-    t0 = time.perf_counter()
-    res = projection.project(targets, views, tris, owners)
-    return info, res, time.perf_counter() - t0, views
-
-
 def projection_section():
     from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
     from scenes import bake
-    info, res, seconds, views = _office_projection()
+    from scenes import capture as sc
+    info, res, seconds, views = sc.project_office()
     truth = bake.bake_lighting(dict(info.lamp_powers), samples=256, seed=0, texture_size=48)
     truth2 = bake.bake_lighting(dict(info.lamp_powers), samples=256, seed=1, texture_size=48)
     rows, all_seen, all_hole, floor = [], [], [], []

@@ -29,14 +29,14 @@ from relight_addon.core.radiosity.memory import estimate_precompute_memory
 from relight_addon.core.relight import texel
 up, mode = int(sys.argv[1]), sys.argv[2]
 cast = {"s": 0.0}
-_cast = texel.TexelLight._cast
+_cast = texel.TexelLight.cast
 def timed_cast(self, *args, **kwargs):   # wall time of the per-texel direct light (the rays and their set-up)
     t = time.perf_counter()
     try:
         return _cast(self, *args, **kwargs)
     finally:
         cast["s"] += time.perf_counter() - t
-texel.TexelLight._cast = timed_cast
+texel.TexelLight.cast = timed_cast
 data = office_geometry(0, 2, 48)
 tex = {s.name: np.kron(s.albedo, np.ones((up, up, 1), np.float32)) for s in data.surfaces}
 sc = office_scene_data(data, tex)
@@ -77,7 +77,7 @@ def main(argv=None):
                      f"{r['cast_s'] / r['seconds']:.0%} | {r['peak_mb']:.0f} | "
                      f"{per:.0f} | {r['estimate_mb']:.0f} |")
     lines += ["", "*direct light s*: wall time of the per-texel direct light (footprint points, "
-              "form factors and the visibility rays to each lamp; texel.TexelLight._cast), over "
+              "form factors and the visibility rays to each lamp; texel.TexelLight.cast), over "
               "every block and the exitance fit's sample; *share*: of the whole precompute.  "
               "*B per texel*: peak RSS over the smallest case's, per covered texel.  The peak "
               "includes the input photos (float32 RGB, 12 B per image texel, held by the "

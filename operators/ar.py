@@ -3,13 +3,13 @@
 (Update, ``relight.update``, refreshes a scene set up for AR through the pipeline's hook).
 
 Set Up AR runs as Precompute does: synchronously from scripts and in background mode, in a
-worker thread with progress and Esc to cancel from the sidebar (precompute._PipelineRunner).
+worker thread with progress and Esc to cancel from the sidebar (precompute.JobRunner).
 """
 
 import bpy
 
 from .base import RelightOperator
-from .precompute import _PipelineRunner, busy_reason
+from .precompute import JobRunner, busy_reason
 
 
 def _ar():
@@ -17,7 +17,7 @@ def _ar():
     return ar
 
 
-class RELIGHT_OT_ar_setup(_PipelineRunner, bpy.types.Operator):
+class RELIGHT_OT_ar_setup(JobRunner, bpy.types.Operator):
     """Make the scene's render the composite over the photo: the camera's background image is
     the photo, the World's Environment Texture lights the virtual objects, the receivers show
     the photo with the objects' soft shadows. Moving the objects needs nothing afterwards;

@@ -15,6 +15,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
                        StringProperty)
 
 from .base import RelightOperator
+from .precompute import JobRunner
 
 # cv2.aruco's predefined dictionaries (OpenCV 4.11), listed here so that registering the
 # add-on does not import OpenCV; tests check the list against cv2.aruco.
@@ -561,17 +562,19 @@ def _seconds(t):
 # project_photos
 # ------------------------------------------------------------------------------------------
 
-class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
+class RELIGHT_OT_project_photos(JobRunner, bpy.types.Operator):
     """Texture the selected meshes from the posed photos (the scene's cameras, each with its
     photo as background image; the selected cameras if any are selected): per texel the best
     views by facing, distance and resolution, ray-cast visibility, exposures matched, holes
     filled from their neighbours.  Meshes without UVs get an xatlas atlas ("RelightUV"); each
     gets a new packed image and material (object-linked slots: the mesh keeps its own), which
-    Precompute reads as the photo texture"""
+    Precompute reads as the photo texture.  Interactively it runs in a worker thread with
+    progress in the status bar; Esc cancels and leaves the scene as it was"""
 
     bl_idname = "relight.project_photos"
     bl_label = "Project Photos"
     bl_options = {'REGISTER', 'UNDO'}
+    _kind = "projection"
 
     texture_size: IntProperty(name="Texture Size", default=0, min=0, max=16384,
                               description="Width and height of each mesh's new texture (0: "
@@ -598,107 +601,111 @@ class RELIGHT_OT_project_photos(RelightOperator, bpy.types.Operator):
             return "Select the meshes to texture"
         return None
 
-    def fail(self, message):
-        self.report({'ERROR'}, message)
-        return {'CANCELLED'}
+    def _prepare(self, context, *args):
+        """Every check, then the xatlas UV maps (the projection reads the meshes through
+        them; ``_abandon`` removes them again) and the projection's inputs."""
+        capture = _core()[0]
+        try:
+            return ProjectionJob(self, context)
+        except capture.CaptureError as ex:
+            self.report({'ERROR'}, str(ex))
+        except ImportError:
+            self.report({'ERROR'}, "xatlas is not available: check the Relight dependencies")
+        return None
 
-    def _views(self, context):
-        import numpy as np
-        capture, _, _, _ = _core()
-        from ..relight_addon.core.capture.projection import View
-        bridge = _bridge()
-        scene = context.scene
-        chosen = [o for o in context.selected_objects if o.type == "CAMERA"]
-        cameras = chosen or sorted((o for o in scene.objects if o.type == "CAMERA"),
-                                   key=lambda o: o.name)
-        views, skipped = [], []
-        for cam in cameras:
-            img = bridge.camera_photo(cam)
-            if img is None:
-                if chosen:
-                    raise capture.CaptureError(f"Camera '{cam.name}' has no photo (an enabled "
-                                               f"background image)")
-                skipped.append(cam.name)
-                continue
-            rgb = bridge.photo_pixels(img)
-            size = (rgb.shape[1], rgb.shape[0])
-            if not bridge.frame_matches(scene, size):
-                w, h = bridge.render_size(scene)
-                raise capture.CaptureError(f"The photo of '{cam.name}' ({size[0]} x {size[1]}) "
-                                           f"does not have the render frame's shape ({w} x {h})")
-            m = bridge.matrix_of(cam)
-            m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0)
-            T = np.linalg.inv(m @ np.diag([1.0, -1.0, -1.0, 1.0]))      # world -> OpenCV camera
-            views.append(View(cam.name, bridge.camera_K(cam, scene, size), T[:3, :3], T[:3, 3], rgb))
-        if not views:
-            raise capture.CaptureError("No camera of the scene has a photo as background image")
-        return views, skipped
+    def _abandon(self, context, job):
+        job.remove_atlases()
 
-    def execute(self, context):
-        capture, _, _, _ = _core()
+    def _finish(self, context, job, result):
+        self.report({'INFO'}, job.finish(result))
+        return {'FINISHED'}
+
+
+class ProjectionJob:
+    """Project Photos' inputs read from the scene (``__init__``, main thread), the bpy-free
+    projection (``compute``, any thread) and its textures written (``finish``, main thread)."""
+
+    label = "projection"
+    action = "project"
+
+    def __init__(self, op, context):
+        capture = _core()[0]
         from ..relight_addon.core.capture import projection
         from .unwrap import UV_NAME, atlas_loop_uvs
         bridge = _bridge()
-        meshes = [o for o in context.selected_objects if o.type == "MESH"]
+        self.uv_map, self.uv_name = op.uv_map, UV_NAME
+        self.options = dict(supersample=op.supersample or None, match_exposure=op.match_exposure,
+                            fill_holes=op.fill_holes)
+        self.meshes = meshes = [o for o in context.selected_objects if o.type == "MESH"]
         if not meshes:
-            return self.fail("Select the meshes to texture")
-        try:
-            views, skipped = self._views(context)
-            atlases = {}
-            for obj in meshes:
-                uv = bridge.uv_layer_name(obj, self.uv_map)
-                if self.uv_map and not uv:
-                    raise capture.CaptureError(f"'{obj.name}' has no UV map '{self.uv_map}'")
-                if not uv:
-                    me = obj.data
-                    if obj.library or me.library or me.override_library or me.is_editmode:
-                        raise capture.CaptureError(f"'{obj.name}' has no UV map and cannot get "
-                                                   f"one (linked, or in Edit Mode)")
-                    if not len(me.polygons):
-                        raise capture.CaptureError(f"'{obj.name}' has no faces")
-                    atlases[obj.name] = atlas_loop_uvs(me, obj.matrix_world)[0]
-        except capture.CaptureError as ex:
-            return self.fail(str(ex))
-        except ImportError:
-            return self.fail("xatlas is not available: check the Relight dependencies")
-        # -- from here on the scene is written --
+            raise capture.CaptureError("Select the meshes to texture")
+        self.views, self.skipped = bridge.posed_views(context.scene, context.selected_objects)
+        atlases = {}
+        for obj in meshes:
+            uv = bridge.uv_layer_name(obj, op.uv_map)
+            if op.uv_map and not uv:
+                raise capture.CaptureError(f"'{obj.name}' has no UV map '{op.uv_map}'")
+            if not uv:
+                me = obj.data
+                if obj.library or me.library or me.override_library or me.is_editmode:
+                    raise capture.CaptureError(f"'{obj.name}' has no UV map and cannot get one "
+                                               f"(linked, or in Edit Mode)")
+                if not len(me.polygons):
+                    raise capture.CaptureError(f"'{obj.name}' has no faces")
+                atlases[obj.name] = atlas_loop_uvs(me, obj.matrix_world)[0]
+        # -- from here on the scene is written (undone by remove_atlases) --
+        self.added = []
         for obj in meshes:
             if obj.name in atlases:
                 layer = obj.data.uv_layers.new(name=UV_NAME)
                 layer.data.foreach_set("uv", atlases[obj.name].reshape(-1))
                 obj.data.update()
-        depsgraph = context.evaluated_depsgraph_get()
-        targets = []
-        sizes = []
-        for obj in meshes:
-            uv = bridge.uv_layer_name(obj, self.uv_map) or UV_NAME
-            tris, uvs = bridge.mesh_triangles(obj, depsgraph, uv)
-            n = self.texture_size or projection.suggest_texture_size(tris, uvs, views)
-            sizes.append(n)
-            targets.append(projection.Target(obj.name, tris, uvs, (n, n)))
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
+                self.added.append((obj.data, layer.name))
         try:
-            tris, owners = bridge.scene_triangles(depsgraph)
-            result = projection.project(
-                targets, views, tris, owners,
-                supersample=self.supersample or None, match_exposure=self.match_exposure,
-                fill_holes=self.fill_holes, progress=lambda f: wm.progress_update(int(100 * f)))
-        except capture.CaptureError as ex:
-            return self.fail(str(ex))
-        finally:
-            wm.progress_end()
-        for obj, res in zip(meshes, result.meshes):
+            depsgraph = context.evaluated_depsgraph_get()
+            self.targets, self.sizes = [], []
+            for obj in meshes:
+                tris, uvs = bridge.mesh_triangles(obj, depsgraph, self._uv(obj))
+                n = op.texture_size or projection.suggest_texture_size(tris, uvs, self.views)
+                self.sizes.append(n)
+                self.targets.append(projection.Target(obj.name, tris, uvs, (n, n)))
+            self.occluders = bridge.scene_triangles(depsgraph)
+        except Exception:
+            self.remove_atlases()
+            raise
+
+    def _uv(self, obj):
+        return _bridge().uv_layer_name(obj, self.uv_map) or self.uv_name
+
+    def remove_atlases(self):
+        """Remove the UV maps this job added (a cancelled or failed projection)."""
+        for me, name in self.added:
+            layer = me.uv_layers.get(name)
+            if layer is not None:
+                me.uv_layers.remove(layer)
+                me.update()
+        self.added = []
+
+    def compute(self, progress=None):
+        from ..relight_addon.core.capture import projection
+        report = None if progress is None else (lambda f: progress(f, "Projecting the photos"))
+        return projection.project(self.targets, self.views, *self.occluders, progress=report,
+                                  **self.options)
+
+    def finish(self, result):
+        """Write the textures and materials; the one-sentence report."""
+        bridge = _bridge()
+        for obj, res in zip(self.meshes, result.meshes):
             img = bridge.image_from_texture(f"{obj.name} Photo", res.texture)
-            bridge.photo_material(obj, img, bridge.uv_layer_name(obj, self.uv_map) or UV_NAME)
-        extra = (f"; textures of {min(sizes)}" + (f"-{max(sizes)}" if max(sizes) > min(sizes) else "")
-                 + " texels a side")
-        if atlases:
-            extra += f"; {len(atlases)} meshes unwrapped by xatlas"
-        if skipped:
-            extra += f"; {len(skipped)} cameras without a photo skipped"
-        self.report({'INFO'}, result.summary() + extra)
-        return {'FINISHED'}
+            bridge.photo_material(obj, img, self._uv(obj))
+        sizes = self.sizes
+        extra = (f"; textures of {min(sizes)}" + (f"-{max(sizes)}" if max(sizes) > min(sizes)
+                                                  else "") + " texels a side")
+        if self.added:
+            extra += f"; {len(self.added)} meshes unwrapped by xatlas"
+        if self.skipped:
+            extra += f"; {len(self.skipped)} cameras without a photo skipped"
+        return result.summary() + extra
 
 
 # ------------------------------------------------------------------------------------------

@@ -34,6 +34,7 @@ class SolveJob:
 
     def __init__(self, job):
         self.job = job
+        self.label = getattr(job, "label", "precompute")      # what busy_reason names
         self.fraction = 0.0
         self.message = "Starting"
         self.result = None
@@ -103,8 +104,8 @@ def busy_reason():
     if job is None or not job.alive:
         return None
     if job.state == "running" and not job.cancelled:
-        return "A precompute is running: wait for it, or press Esc to cancel it"
-    return "The cancelled precompute is stopping: a moment"
+        return f"A {job.label} is running: wait for it, or press Esc to cancel it"
+    return f"The cancelled {job.label} is stopping: a moment"
 
 
 def _report_outcome(op, outcome):
@@ -117,8 +118,10 @@ def _report_outcome(op, outcome):
         op.report({'INFO'}, outcome.message)
 
 
-class _PipelineRunner(RelightOperator):
-    """Prepare, compute (synchronously or in a worker thread with a modal timer), finish."""
+class JobRunner(RelightOperator):
+    """Prepare, compute (synchronously or in a worker thread with a modal timer), finish: the
+    pipeline's jobs by default; an operator with a job of its own (a ``compute(progress)``,
+    an ``action``, a ``label``) overrides ``_prepare``, ``_finish`` and ``_abandon``."""
 
     _timer = None
     _solve = None
@@ -131,6 +134,10 @@ class _PipelineRunner(RelightOperator):
     def _arguments(self):
         """What ``_prepare`` takes beside the context (Precompute: its preset and removal)."""
         return ()
+
+    def _abandon(self, context, job):
+        """The job was cancelled or failed: undo what ``_prepare`` wrote (the pipeline's
+        prepare writes nothing)."""
 
     def execute(self, context):
         job = self._prepare(context, *self._arguments())
@@ -166,6 +173,7 @@ class _PipelineRunner(RelightOperator):
         try:
             result = job.compute()
         except Exception as ex:
+            self._abandon(context, job)
             self.report({'ERROR'}, f"Relight {self._kind} failed: {pipeline.user_message(ex)}")
             return {'CANCELLED'}
         return self._finish(context, job, result)
@@ -206,6 +214,7 @@ class _PipelineRunner(RelightOperator):
         if event.type == 'ESC' and event.value == 'PRESS':
             solve.cancel()
             self._cleanup(context)
+            self._abandon(context, self._job)
             self.report({'INFO'}, f"Relight {self._kind} cancelled: nothing changed")
             return {'CANCELLED'}
         if event.type != 'TIMER':
@@ -218,12 +227,13 @@ class _PipelineRunner(RelightOperator):
         self._cleanup(context)
         if solve.state == "done":
             return self._finish(context, self._job, solve.result)
+        self._abandon(context, self._job)
         if solve.state == "failed":
             self.report({'ERROR'}, f"Relight {self._kind} failed: {solve.error}")
         return {'CANCELLED'}
 
 
-class RELIGHT_OT_precompute(_PipelineRunner, bpy.types.Operator):
+class RELIGHT_OT_precompute(JobRunner, bpy.types.Operator):
     """Estimate the real lamps and reflectances from the photos and write relightable
     materials: the photographed shadows are removed and each lamp gets a map (Esc cancels).
     Lamps already precomputed keep their power in the photo (Clear forgets it)"""
@@ -244,7 +254,7 @@ class RELIGHT_OT_precompute(_PipelineRunner, bpy.types.Operator):
         return self.preset, self.correction
 
 
-class RELIGHT_OT_update(_PipelineRunner, bpy.types.Operator):
+class RELIGHT_OT_update(JobRunner, bpy.types.Operator):
     """Bring the relit materials up to date: virtual lamps and objects are added to the kept
     solution (no new solve), the relit materials are shown again after Restore, and the room is
     solved again only after its surfaces, photos or photographed lamps' places changed (lamp

@@ -19,7 +19,7 @@ from bpy.app.handlers import persistent
 STILL = 0.5             # s without a transform change before settling
 POLL = 0.2              # s between the timer's checks
 
-_pending = {}           # scene name -> time of the last transform change seen
+pending = {}            # scene name -> time of the last transform change seen
 
 
 
@@ -86,30 +86,30 @@ def settle_now(scene) -> bool:
     return True
 
 
-def _tick(now=None):
+def tick(now=None):
     """Timer: settle the scenes whose objects stood still for STILL seconds."""
     now = time.monotonic() if now is None else now
     held = dragging()                    # a trace would freeze the drag: wait for its end
-    for name, t in list(_pending.items()):
+    for name, t in list(pending.items()):
         if now - t < STILL or held:
             continue
-        del _pending[name]
+        del pending[name]
         scene = bpy.data.scenes.get(name)
         if scene is not None:
             try:
                 settle_now(scene)
             except Exception as ex:          # a timer must not raise; the spheres stay
                 print(f"Relight: the moving shadows could not be settled: {ex}")
-    return POLL if _pending else None
+    return POLL if pending else None
 
 
 @persistent
 def _watch(scene, depsgraph=None):
     if bpy.app.background or not depsgraph_moves(scene, depsgraph):
         return
-    _pending[scene.name] = time.monotonic()
-    if not bpy.app.timers.is_registered(_tick):
-        bpy.app.timers.register(_tick, first_interval=POLL)
+    pending[scene.name] = time.monotonic()
+    if not bpy.app.timers.is_registered(tick):
+        bpy.app.timers.register(tick, first_interval=POLL)
 
 
 def depsgraph_moves(scene, depsgraph) -> bool:
@@ -135,9 +135,9 @@ def attach():
 def detach():
     if _watch in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(_watch)
-    if bpy.app.timers.is_registered(_tick):
-        bpy.app.timers.unregister(_tick)
-    _pending.clear()
+    if bpy.app.timers.is_registered(tick):
+        bpy.app.timers.unregister(tick)
+    pending.clear()
 
 
 classes = ()

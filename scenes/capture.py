@@ -750,3 +750,26 @@ def plain_detections(dets):
         p.corners = d.raw
         out[k] = p
     return out
+
+
+def project_office(texture_size=48):
+    """The photos of :func:`office_photos` projected onto the office's UV maps by the core
+    (the views as Project Photos reads them): (info, the projection's result, its seconds,
+    the views).  The add-on is registered from the checkout."""
+    import importlib
+    bpy = _bpy()
+    from relight_addon.core.capture import projection
+    from scenes.addon import register_repo_addon
+    register_repo_addon()
+    _, info = office_photos(texture_size=texture_size)
+    bridge = importlib.import_module("relight_ext.relight_addon.blender.capture")
+    views, _ = bridge.posed_views(bpy.context.scene)
+    dg = bpy.context.evaluated_depsgraph_get()
+    targets = []
+    for name in info.objects:
+        tris, uvs = bridge.mesh_triangles(bpy.data.objects[name], dg, "UVMap")
+        targets.append(projection.Target(name, tris, uvs, (texture_size, texture_size)))
+    tris, owners = bridge.scene_triangles(dg)
+    t0 = time.perf_counter()
+    result = projection.project(targets, views, tris, owners)
+    return info, result, time.perf_counter() - t0, views

@@ -245,9 +245,9 @@ def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
     fake = _FakeGpu()
     monkeypatch.setitem(sys.modules, "gpu", fake.gpu)
     monkeypatch.setitem(sys.modules, "gpu_extras.batch", fake.batch)
-    monkeypatch.setitem(ar_draw._state, "shader", None)
-    monkeypatch.setitem(ar_draw._state, "batch", None)
-    monkeypatch.setitem(ar_draw._state, "textures", None)
+    monkeypatch.setitem(ar_draw.cache, "shader", None)
+    monkeypatch.setitem(ar_draw.cache, "batch", None)
+    monkeypatch.setitem(ar_draw.cache, "textures", None)
     ctx = SimpleNamespace(scene=sc, region_data=SimpleNamespace(
         perspective_matrix=Matrix.Identity(4)),
         evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
@@ -256,7 +256,7 @@ def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
         ob.location = loc
         bpy.context.view_layer.update()
         fake.log.clear()
-        ar_draw._draw_frame(ctx)
+        ar_draw.draw_frame(ctx)
         draws = [e for e in fake.log if isinstance(e, tuple) and e[0] == "draw"]
         assert len(draws) == 1
         centres, radii = _expected_spheres(ob, group)

@@ -6,7 +6,6 @@ Truth: ``scenes.bake.bake_lighting`` (DIFFUSE, direct + indirect + colour: the o
 radiance of every texel, what a photo shows).  The issue's target: mean CIEDE2000 <= 2.0 over
 the texels some camera sees; the texels no camera sees keep colours of their own object.
 """
-import importlib
 
 import numpy as np
 import pytest
@@ -14,11 +13,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("cv2")
 
-from relight_addon.core.capture import projection  # noqa: E402
 from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402
 from scenes import bake  # noqa: E402
 from scenes import capture as sc  # noqa: E402
-from scenes.addon import register_repo_addon  # noqa: E402
 
 pytestmark = pytest.mark.slow
 SIZE = 48
@@ -26,19 +23,8 @@ SIZE = 48
 
 @pytest.fixture(scope="module")
 def office():
-    register_repo_addon()
-    paths, info = sc.office_photos(texture_size=SIZE)
+    info, result, _, _ = sc.project_office(texture_size=SIZE)
     truth = bake.bake_lighting(dict(info.lamp_powers), samples=256, seed=0, texture_size=SIZE)
-    bridge = importlib.import_module("relight_ext.relight_addon.blender.capture")
-    ops = importlib.import_module("relight_ext.operators.capture")
-    views, _ = ops.RELIGHT_OT_project_photos._views(None, bpy.context)
-    dg = bpy.context.evaluated_depsgraph_get()
-    targets = []
-    for name in info.objects:
-        tris, uvs = bridge.mesh_triangles(bpy.data.objects[name], dg, "UVMap")
-        targets.append(projection.Target(name, tris, uvs, (SIZE, SIZE)))
-    tris, owners = bridge.scene_triangles(dg)
-    result = projection.project(targets, views, tris, owners)
     return info, truth, result
 
 

@@ -87,8 +87,7 @@ def test_exposure_gains_and_holes(photos):
     texels under the box are the holes."""
     from relight_addon.core.capture import projection
     scene, floor, box, cams, bridge = _setup(photos)
-    views = importlib.import_module("relight_ext.operators.capture") \
-        .RELIGHT_OT_project_photos._views(None, bpy.context)[0]
+    views = bridge.posed_views(bpy.context.scene)[0]
     dg = bpy.context.evaluated_depsgraph_get()
     tris, uvs = bridge.mesh_triangles(floor, dg, "UVMap")
     res = projection.project([projection.Target("Floor", tris, uvs, (64, 64))], views,
@@ -162,3 +161,47 @@ def test_automatic_texture_size(photos):
     bpy.ops.relight.project_photos()
     tex, _ = _texture(floor)
     assert 128 <= tex.shape[0] <= 256 and tex.shape[0] == tex.shape[1]
+
+
+def test_a_failed_or_cancelled_projection_changes_nothing(photos, monkeypatch):
+    """A mesh without UVs is unwrapped before the projection reads it; when the projection then
+    fails (here: the core raises) or is cancelled (Esc: the worker's progress raises), the new
+    UV map goes again and nothing else is written."""
+    from relight_addon.core.capture import CaptureError
+    scene, floor, box, cams, bridge = _setup(photos)
+    box.select_set(True)                           # no UVs: gets an xatlas atlas first
+    state = _state(scene)
+    projection = importlib.import_module("relight_ext.relight_addon.core.capture.projection")
+
+    def fails(*args, **kwargs):
+        raise CaptureError("the projection failed")
+    with monkeypatch.context() as m:
+        m.setattr(projection, "project", fails)
+        with pytest.raises(RuntimeError, match="the projection failed"):
+            bpy.ops.relight.project_photos(texture_size=32)
+    assert _state(scene) == state and "RelightUV" not in box.data.uv_layers
+    # the modal path: the job prepared as invoke prepares it, its worker cancelled midway,
+    # then what the operator does on Esc
+    capture_ops = importlib.import_module("relight_ext.operators.capture")
+    precompute = importlib.import_module("relight_ext.operators.precompute")
+    op = type("Op", (), dict(uv_map="", supersample=0, match_exposure=True, fill_holes=True,
+                             texture_size=32))()
+    job = capture_ops.ProjectionJob(op, bpy.context)
+    assert "RelightUV" in box.data.uv_layers
+    solve = precompute.SolveJob(job)
+    seen = []
+    report = solve.progress
+
+    def progress(fraction, message):
+        seen.append(fraction)
+        if fraction >= 0.3:
+            solve.cancel()
+        return report(fraction, message)
+    solve.progress = progress
+    solve.start()
+    assert solve.join(timeout=120)
+    assert solve.state == "cancelled" and solve.result is None
+    assert seen and max(seen) < 1.0
+    assert solve.label == "projection"          # what the busy buttons name
+    job.remove_atlases()
+    assert _state(scene) == state

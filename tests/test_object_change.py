@@ -112,7 +112,7 @@ def test_objects_only_occluder_counts_what_the_room_leaves_free():
 
 def test_an_object_takes_away_only_the_lamp_light_the_leaves_had():
     """light_change reads the leaves' light as the solve lit it.  A proxy's leaves are lit
-    against the full mesh (shadowfree._proxy_lamp_view); here a floor under a point light,
+    against the full mesh (shadowfree.proxy_lamp_view); here a floor under a point light,
     solved with a lamp view in which a sheet blocks the light: a panel put between the lamp
     and the floor takes nothing away.  Lit against the floor's own occluder (which has no
     sheet), the same panel took away the light of its shadow, which the leaves never had."""

@@ -10,7 +10,7 @@ import pytest
 # left out of `make test-quick`: scanned rooms of 100k faces solved on their proxies (minutes)
 pytestmark = pytest.mark.slow
 
-from relight_addon.core.radiosity.proxy import (_closest_on_triangles, build_proxy, locate,
+from relight_addon.core.radiosity.proxy import (build_proxy, closest_on_triangles, locate,
                                                 plane_normals, smooth_normals)
 from relight_addon.core.scene import SceneData
 from scenes import family as fam
@@ -45,7 +45,7 @@ def test_closest_points_on_triangles_match_a_dense_search():
     n = 400
     a, b, c = rng.normal(size=(3, n, 3))
     p = rng.normal(size=(n, 3)) * 1.5
-    bary = _closest_on_triangles(p, a, b, c)
+    bary = closest_on_triangles(p, a, b, c)
     assert np.all(bary >= -1e-12) and np.allclose(bary.sum(axis=1), 1.0)
     q = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
     exact = np.linalg.norm(p - q, axis=1)
@@ -404,11 +404,11 @@ def test_a_proxy_lets_in_the_sun_through_its_window_as_the_mesh_does():
     against the window's area x cos (no scene code involved).  Against the proxy's own
     triangles the decimation's moved borders let more in (measured +18 % here; +6.6 % on the
     100k scan at high); against the full mesh, from above the bumps and the proxy's distance
-    (shadowfree._proxy_lamp_view), within 2 % (measured -0.7 %)."""
+    (shadowfree.proxy_lamp_view), within 2 % (measured -0.7 %)."""
     from relight_addon.core.lights import SUN, Lights
     from relight_addon.core.radiosity.hierarchy import Hierarchy
     from relight_addon.core.radiosity.precompute import lights_on_elements
-    from relight_addon.core.relight.shadowfree import _proxy_lamp_view
+    from relight_addon.core.relight.shadowfree import proxy_lamp_view
     spec = fam.room_spec(3)
     W, D, H = spec.size
     u0, u1, v0, v1 = spec.window["uv"]
@@ -437,7 +437,7 @@ def test_a_proxy_lets_in_the_sun_through_its_window_as_the_mesh_does():
         occ, _ = lights_on_elements(pscene, h, leaves, occluder, 2, 8, 0, size, lift)
         return float(occ[0, :, 1] @ area)
 
-    full = _proxy_lamp_view(proxy, scan.make_occluder())
+    full = proxy_lamp_view(proxy, scan.make_occluder())
     assert power(full["light_occluder"], full["light_lift"]) == pytest.approx(want, rel=0.02)
     own = power(pscene.make_occluder(), 0.0)
     assert own > 1.05 * want                                # what the full mesh is for

@@ -421,8 +421,8 @@ def test_the_fit_sample_casts_the_luminance_of_the_whole_cast(office, results, m
     res = results["texel"]
     light = res.texel_light()
     assert res.texel_map.n_texels > 3 * texel.TEXEL_CHUNK
-    U, O = light._cast()
-    lum = light._cast(luminance_only=True)
+    U, O = light.cast()
+    lum = light.cast(luminance_only=True)
     assert lum.shape == (res.scene.n_lamps, res.texel_map.n_texels)
     np.testing.assert_allclose(lum, luminance(O).T, rtol=1e-12, atol=0)
     assert (lum > 0).any(axis=1).all()                   # every lamp lights some texel

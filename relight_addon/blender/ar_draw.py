@@ -22,8 +22,9 @@ import numpy as np
 
 from . import ar_nodes, ids
 
-_state = {"handle": None, "shader": None, "batch": None, "batch_key": None,
-          "textures": None, "tables_key": None, "failed": None}
+# the handle and the GPU objects the handler made (made once, dropped when it is removed)
+cache = {"handle": None, "shader": None, "batch": None, "batch_key": None,
+         "textures": None, "tables_key": None, "failed": None}
 
 
 def _ar_state(scene):
@@ -164,16 +165,16 @@ def _draw():
     """The SpaceView3D POST_VIEW callback: a failure is printed once and turns the drawing off
     (a traceback at every redraw would flood the console), until the handler is installed
     again."""
-    if _state["failed"] is not None:
+    if cache["failed"] is not None:
         return
     try:
-        _draw_frame()
+        draw_frame()
     except Exception as ex:  # noqa: BLE001 - any gpu or data error: stop drawing, say why
-        _state["failed"] = f"{type(ex).__name__}: {ex}"
-        print(f"Relight: the AR viewport shadows are off ({_state['failed']})")
+        cache["failed"] = f"{type(ex).__name__}: {ex}"
+        print(f"Relight: the AR viewport shadows are off ({cache['failed']})")
 
 
-def _draw_frame(context=None):
+def draw_frame(context=None):
     """One frame of the handler in ``context`` (bpy.context: the region being drawn)."""
     import bpy
     import gpu
@@ -187,26 +188,26 @@ def _draw_frame(context=None):
     objects = frame_data(scene)
     if not objects:
         return
-    if _state["shader"] is None:
-        _state["shader"] = gpu.shader.create_from_info(shader_create_info())
-    shader = _state["shader"]
+    if cache["shader"] is None:
+        cache["shader"] = gpu.shader.create_from_info(shader_create_info())
+    shader = cache["shader"]
     key = receiver_key(scene, st)
-    if _state["batch"] is None or _state["batch_key"] != key:
+    if cache["batch"] is None or cache["batch_key"] != key:
         pos, nor = receiver_arrays(scene, st, context.evaluated_depsgraph_get())
         if len(pos) == 0:
             return
-        _state["batch"] = batch_for_shader(shader, "TRIS", {"pos": pos.tolist(),
+        cache["batch"] = batch_for_shader(shader, "TRIS", {"pos": pos.tolist(),
                                                             "nor": nor.tolist()})
-        _state["batch_key"] = key
+        cache["batch_key"] = key
     tables_key = (st.get("env_hash"), st.get("bands"), st.get("rows"))
-    if _state["textures"] is None or _state["tables_key"] != tables_key:
+    if cache["textures"] is None or cache["tables_key"] != tables_key:
         tex = table_textures(st)
         if tex is None:
             return
-        _state["textures"] = (_texture(tex["irradiance_map"]),
+        cache["textures"] = (_texture(tex["irradiance_map"]),
                               _texture(tex["cap_tables"], layers=len(tex["cap_tables"])))
-        _state["tables_key"] = tables_key
-    irr, caps = _state["textures"]
+        cache["tables_key"] = tables_key
+    irr, caps = cache["textures"]
     gpu.state.blend_set("MULTIPLY")
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(False)
@@ -217,7 +218,7 @@ def _draw_frame(context=None):
         shader.uniform_sampler("cap_tables", caps)
         for _, u in objects:
             _set_uniforms(shader, u)
-            _state["batch"].draw(shader)
+            cache["batch"].draw(shader)
     finally:
         gpu.state.depth_mask_set(True)
         gpu.state.depth_test_set("NONE")
@@ -225,7 +226,7 @@ def _draw_frame(context=None):
 
 
 def is_registered():
-    return _state["handle"] is not None
+    return cache["handle"] is not None
 
 
 def register_draw():
@@ -233,8 +234,8 @@ def register_draw():
     import bpy
     if bpy.app.background:
         return False
-    if _state["handle"] is None:
-        _state["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw, (), "WINDOW",
+    if cache["handle"] is None:
+        cache["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw, (), "WINDOW",
                                                                   "POST_VIEW")
     return True
 
@@ -242,8 +243,8 @@ def register_draw():
 def unregister_draw():
     """Remove the draw handler (if any) and drop the gpu objects."""
     import bpy
-    handle = _state["handle"]
-    _state.update(handle=None, shader=None, batch=None, batch_key=None, textures=None,
+    handle = cache["handle"]
+    cache.update(handle=None, shader=None, batch=None, batch_key=None, textures=None,
                   tables_key=None, failed=None)
     if handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")

@@ -162,6 +162,38 @@ def photo_pixels(image) -> np.ndarray:
     return np.ascontiguousarray(rgb[::-1])
 
 
+
+def posed_views(scene, selected=()):
+    """The projection's views: the selected cameras (each must have a photo), else every camera
+    of the scene with one (the others skipped, by name); raises CaptureError where a photo is
+    not the render frame's shape or no camera has a photo."""
+    from ..core.capture.projection import View
+    chosen = [o for o in selected if o.type == "CAMERA"]
+    cameras = chosen or sorted((o for o in scene.objects if o.type == "CAMERA"),
+                               key=lambda o: o.name)
+    views, skipped = [], []
+    for cam in cameras:
+        img = camera_photo(cam)
+        if img is None:
+            if chosen:
+                raise CaptureError(f"Camera '{cam.name}' has no photo (an enabled background "
+                                   f"image)")
+            skipped.append(cam.name)
+            continue
+        rgb = photo_pixels(img)
+        size = (rgb.shape[1], rgb.shape[0])
+        if not frame_matches(scene, size):
+            w, h = render_size(scene)
+            raise CaptureError(f"The photo of '{cam.name}' ({size[0]} x {size[1]}) does not "
+                               f"have the render frame's shape ({w} x {h})")
+        m = matrix_of(cam)
+        m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0)
+        T = np.linalg.inv(m @ np.diag([1.0, -1.0, -1.0, 1.0]))          # world -> OpenCV camera
+        views.append(View(cam.name, camera_K(cam, scene, size), T[:3, :3], T[:3, 3], rgb))
+    if not views:
+        raise CaptureError("No camera of the scene has a photo as background image")
+    return views, skipped
+
 def new_float_image(name, rgb, colorspace="Linear Rec.709"):
     """A packed float image from (H, W, 3) linear RGB, top row first."""
     rgb = np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0, posinf=0.0, neginf=0.0)

@@ -29,7 +29,10 @@ SHADOW_ITEMS = (
                           "on a farm without the extension (direct light only)"),
 )
 DEFAULT_SPHERES = 32
-MAX_SPHERES = 512
+# the most that renders in reasonable time (issue 44.10, 2 cores: a 16 x 16 one-sample Cycles
+# frame took 5.6 s at 128 and did not finish in 180 s at 512; EEVEE's compiler fails past
+# about 128 per lamp); AR mode's shader holds as many (core/ar/shader_data.MAX_SPHERES)
+MAX_SPHERES = 128
 
 
 def raw_property(obj, name, default):

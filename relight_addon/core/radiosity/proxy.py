@@ -244,7 +244,7 @@ def _with_backs(proxy: SceneData, of_patch, area_front, back_of, surf):
     return new, front
 
 
-def _closest_on_triangles(p, a, b, c):
+def closest_on_triangles(p, a, b, c):
     """Closest points of triangles (a, b, c) to points p, as barycentric (l_a, l_b, l_c)
     (Ericson, Real-Time Collision Detection 5.1.5, vectorised over regions)."""
     ab, ac, ap = b - a, c - a, p - a
@@ -316,7 +316,7 @@ def _nearest_on(proxy, tri_normal, p, nrm, cand):
     m, k = cand.shape
     rep = np.repeat(p, k, axis=0)
     tri = proxy.corners[cand.ravel()]
-    bary = _closest_on_triangles(rep, tri[:, 0], tri[:, 1], tri[:, 2])
+    bary = closest_on_triangles(rep, tri[:, 0], tri[:, 1], tri[:, 2])
     q = np.einsum("ij,ijk->ik", bary, tri[:, :3])
     d = np.linalg.norm(rep - q, axis=1).reshape(m, k)
     facing = np.einsum("ij,ij->i", np.repeat(nrm, k, axis=0),

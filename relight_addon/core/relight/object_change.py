@@ -589,7 +589,7 @@ def light_change(objects: VirtualObjects, sol, room, scale, quality, seed):
     """(k, L, 3) change of the direct light of ``sol.scene.lights`` on the leaves (at the
     solution's exitance factors), cast again only where an object can shadow them.  The leaves
     see the lights as the solve lit them (a proxy's: against the full mesh, lifted;
-    shadowfree._proxy_lamp_view), so an object takes away only light they had."""
+    shadowfree.proxy_lamp_view), so an object takes away only light they had."""
     h, leaves = sol.hierarchy, sol.leaves
     k = len(sol.basis)
     out = np.zeros((k, len(leaves), 3))

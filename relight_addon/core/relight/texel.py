@@ -68,7 +68,7 @@ class TexelLight:
         """Direct irradiance (T, k, 3) from each lamp at unit exitance factor, unoccluded and
         with visibility, averaged over each texel's footprint (cast on the first call)."""
         if self._direct is None:
-            self._direct = self._cast()
+            self._direct = self.cast()
         return self._direct
 
     def rows(self, start, stop):
@@ -128,7 +128,7 @@ class TexelLight:
             if self._direct is not None:
                 self._direct_luminance = luminance(self._direct[1]).T            # (k, T)
             else:
-                self._direct_luminance = self._cast(luminance_only=True)
+                self._direct_luminance = self.cast(luminance_only=True)
                 give_back_memory()       # the casting threads' freed chunks (their own heaps)
         occ, _ = leaf_indirect(sol, unoccluded=False)
         read = self.reader(sol)
@@ -166,7 +166,7 @@ class TexelLight:
         return self.face_normals if self.face_normals is not None else \
             self.scene.area_normal()[1]
 
-    def _cast(self, luminance_only=False):
+    def cast(self, luminance_only=False):
         """(U, O) as :meth:`direct` gives them; with ``luminance_only`` the luminance of O
         alone, (k, T) (the exitance fit's sample of a photo-resolution map: 24 instead of 96
         bytes a texel at 2 lamps)."""

@@ -67,7 +67,7 @@ def add_lamps(result, lights: Lights, names, seed=0):
     q = sol.quality
     size = sol.context.get("scale", 1.0)
     proxy = sol.context.get("proxy")
-    # (a proxy's leaves are lit as the run lit them: shadowfree._proxy_lamp_view)
+    # (a proxy's leaves are lit as the run lit them: shadowfree.proxy_lamp_view)
     occluder, lift = sol.lamp_view(result.occluder) if proxy is not None else (result.occluder, 0.0)
     # The new lamps' direct light on every leaf, then their bases on the existing system.
     lit_scene = _only_lights(scene, rows)
