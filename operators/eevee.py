@@ -22,6 +22,21 @@ def last_result(scene):
     return state.last_result(scene)
 
 
+# A background bake's seconds: a start-up, then a cost per volume sample and ray, measured on
+# this project's 2-core machine with EEVEE on Mesa's software GPU (benchmarks/results/
+# eevee_bake.md; a GPU bakes faster)
+BAKE_START_S, BAKE_RAY_S = 5.0, 4.5e-5
+
+
+def bake_seconds(count, samples):
+    """Predicted seconds of a background bake of ``count`` volume samples x ``samples`` rays."""
+    return BAKE_START_S + BAKE_RAY_S * float(count) * float(samples)
+
+
+def _duration(seconds):
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"
+
+
 class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
     """Place an irradiance volume over the relit room and bake it, so that EEVEE lights virtual
     objects with the relit room's light (Cycles does by itself).  Bake again after moving
@@ -40,6 +55,13 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
         name="Samples", default=256, min=1, soft_max=2048,
         description="Rays per volume sample when baking: the bake's time grows with it "
                     "(Blender's default of 2048 took minutes headless, on a software GPU)")
+
+    time_limit: bpy.props.FloatProperty(
+        name="Time Limit", default=300.0, min=0.0, subtype='TIME_ABSOLUTE', unit='TIME_ABSOLUTE',
+        description="In background mode (a script, a farm node) Blender's bake blocks until it "
+                    "is done and cannot be cancelled: a bake predicted to take longer is not "
+                    "started (0: no limit).  The prediction is a software GPU's, an upper bound "
+                    "for a real one")
 
     @classmethod
     def disabled_reason(cls, context):
@@ -75,6 +97,14 @@ class RELIGHT_OT_eevee_light(RelightOperator, bpy.types.Operator):
         # Blender's own bake: a job with progress and cancel in the UI, blocking in background
         import time
         how = 'EXEC_DEFAULT' if bpy.app.background else 'INVOKE_DEFAULT'
+        predicted = bake_seconds(count, self.samples)
+        if bpy.app.background and self.time_limit > 0 and predicted > self.time_limit:
+            self.report({'ERROR'}, f"Relight: the irradiance volume is placed but not baked: "
+                                   f"{count} samples x {self.samples} rays would take about "
+                                   f"{_duration(predicted)} here, past the "
+                                   f"{self.time_limit:.0f} s Time Limit (raise Spacing, lower "
+                                   "Samples, raise the limit, or bake it in Blender with a window)")
+            return {'CANCELLED'}
         t0 = time.perf_counter()
         try:
             with context.temp_override(active_object=probe, object=probe,

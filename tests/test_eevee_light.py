@@ -148,3 +148,24 @@ def test_irradiance_volume_lights_virtual_objects_in_eevee(tmp_path):
     assert probe.data.intensity == pytest.approx(1.0 - shares["LampA"], rel=1e-5)
     assert bpy.ops.relight.clear() == {"FINISHED"}
     assert probe_mod.find_volume(scene) is None and not bpy.data.lightprobes
+
+
+def test_a_bake_past_the_time_limit_is_not_started_in_background():
+    """Background mode blocks in Blender's bake (issue 44.10: 2048 rays did not return in 150 s):
+    a bake predicted past Time Limit is refused, naming the sizes and what to change; the
+    volume is placed, and a bake within the limit goes ahead."""
+    addon()
+    build_scene()
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    eevee = importlib.import_module(PKG + ".operators.eevee")
+    probe_mod = importlib.import_module(PKG + ".relight_addon.blender.eevee_probe")
+    with pytest.raises(RuntimeError, match=r"not baked: \d+ samples x 2048 rays would take "
+                                           r"about .* past the 60 s Time Limit"):
+        bpy.ops.relight.eevee_light(spacing=0.1, samples=2048, time_limit=60.0)
+    probe = probe_mod.find_volume(bpy.context.scene)
+    assert probe is not None
+    count = np.prod(probe_mod.resolution(probe.data))
+    assert eevee.bake_seconds(count, 2048) > 60.0
+    # the smallest bake is predicted within any sensible limit, and runs
+    assert eevee.bake_seconds(8, 1) < 10.0
+    assert bpy.ops.relight.eevee_light(spacing=2.0, samples=1, time_limit=60.0) == {"FINISHED"}
