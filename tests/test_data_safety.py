@@ -206,11 +206,13 @@ def test_reader_warnings_reach_the_status_and_the_panel():
     assert any("NoUV" in t for t in lines)
 
 
-def test_non_finite_vertices_are_skipped_with_a_warning():
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_non_finite_vertices_are_skipped_with_a_warning(value):
+    """(An infinite vertex once gave "The scene has no lamps" with two lamps present.)"""
     addon()
     build_scene()
     me = bpy.data.objects["Box"].data
-    me.vertices[0].co = (float("nan"), 0.0, 0.0)
+    me.vertices[0].co = (value, 0.0, 0.0)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     warnings = list(bpy.context.scene["relight_status"]["warnings"])
     assert any("'Box'" in w and "non-finite" in w for w in warnings), warnings

@@ -64,6 +64,28 @@ def test_a_very_bright_sun_leaves_the_rest_of_the_room_lit(test_room):
     assert np.isfinite(relit_now("Box")).all()
 
 
+def test_a_very_bright_narrow_area_light_is_refused_naming_both_ends(test_room):
+    """A 1e9 W area light of spread 5 degrees beside the 60 W and 30 W lamps (the box and the
+    ceiling rendered black): refused, naming the weak lamps and the strong one (either may be
+    the slip); with the area light at a power of the others' order the room is the photo."""
+    area = bpy.data.lights.new("Spot", "AREA")
+    area.energy = 1e9
+    area.size = 0.2
+    area.spread = np.radians(5.0)
+    obj = bpy.data.objects.new("Spot", area)
+    obj.location = (-1.2, -1.2, 2.9)
+    bpy.context.scene.collection.objects.link(obj)
+    with pytest.raises(RuntimeError, match=r"Light 'LampB' is set to 30 W, 3e-08 of 'Spot' "
+                                           r"\(1e\+09 W\)"):
+        bpy.ops.relight.precompute(preset="draft")
+    area.energy = 500.0
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    for name in ("Floor", "Ceiling", "WallXn"):
+        got, want = relit_now(name), _photo(name)
+        assert got.mean() / want.mean() == pytest.approx(1.0, abs=2e-3), name
+    assert np.isfinite(relit_now("Box")).all()
+
+
 @pytest.mark.parametrize("power, says", [
     (1e-9, "Light 'LampB' is set to 1e-09 W"),
     (float("inf"), "Light 'LampB' has power inf"),

@@ -580,14 +580,16 @@ def _check_powers(report):
         if src.get("kind") == "light" and not src.get("virtual") and src["power_photo"] > 0:
             by_unit.setdefault(src["type"] == "SUN", []).append(src)
     for group in by_unit.values():
-        strongest = max(s["power_photo"] for s in group)
+        top = max(group, key=lambda s: s["power_photo"])
+        strongest = top["power_photo"]
         for s in group:
             if s["power_photo"] < WEAKEST_LAMP * strongest:
                 unit = "W/m^2" if s["type"] == "SUN" else "W"
+                # the strongest is named too: either may be the slip (1e-9 W, or 1e9 W)
                 report.errors.append(
                     f"Light '{s['name']}' is set to {s['power_photo']:g} {unit}, "
-                    f"{s['power_photo'] / strongest:.0e} of the strongest lamp: set its power in "
-                    "the photo (0 if it was off)")
+                    f"{s['power_photo'] / strongest:.0e} of '{top['name']}' ({strongest:g} "
+                    f"{unit}): set each lamp's power in the photo (0 if it was off)")
 
 
 class _Reader:
@@ -725,7 +727,9 @@ class _Reader:
             co = _transform(matrix, _get(me.vertices, "co", n_v, 3, np.float32).astype(np.float64))
             loop_vert = _get(me.loops, "vertex_index", n_loops, 1, np.int32)
             loops, poly = _mesh_faces(me, report)
-            finite = np.isfinite(co[loop_vert[loops]]).all(axis=(1, 2))
+            # (Blender stores an infinite coordinate as the largest float32: MAX_VALUE)
+            c = co[loop_vert[loops]]
+            finite = (np.isfinite(c) & (np.abs(c) < MAX_VALUE)).all(axis=(1, 2))
             if not finite.all():
                 report.warn(f"Object '{label}': {int((~finite).sum())} face(s) have non-finite "
                             "vertex coordinates (NaN or infinite) and are skipped")
