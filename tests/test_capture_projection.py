@@ -17,6 +17,7 @@ bpy = pytest.importorskip("bpy")
 pytest.importorskip("cv2")
 
 from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab  # noqa: E402
+from helpers.blender import run_cancelled_at  # noqa: E402
 from scenes import capture as sc  # noqa: E402
 from scenes.addon import register_repo_addon  # noqa: E402
 
@@ -189,17 +190,7 @@ def test_a_failed_or_cancelled_projection_changes_nothing(photos, monkeypatch):
     job = capture_ops.ProjectionJob(op, bpy.context)
     assert "RelightUV" in box.data.uv_layers
     solve = precompute.SolveJob(job)
-    seen = []
-    report = solve.progress
-
-    def progress(fraction, message):
-        seen.append(fraction)
-        if fraction >= 0.3:
-            solve.cancel()
-        return report(fraction, message)
-    solve.progress = progress
-    solve.start()
-    assert solve.join(timeout=120)
+    seen = run_cancelled_at(solve, 0.3)
     assert solve.state == "cancelled" and solve.result is None
     assert seen and max(seen) < 1.0
     assert solve.label == "projection"          # what the busy buttons name

@@ -25,7 +25,7 @@ bpy = pytest.importorskip("bpy")
 
 from scenes.addon import PACKAGE as PKG  # noqa: E402
 from relight_addon.core.texture.colour import srgb_to_linear  # noqa: E402
-from helpers.blender import addon, pixels, relit_state  # noqa: E402
+from helpers.blender import addon, pixels, relit_state, run_cancelled_at  # noqa: E402
 from helpers.room import LAMPS, TEX, _quad, build_scene, mesh_object  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -512,18 +512,7 @@ def test_cancel_midway_changes_nothing():
     op = importlib.import_module(PKG + ".operators.precompute")
     before = relit_state()
     job = op.SolveJob(_prepare("draft"))
-    seen = []
-    report_progress = job.progress
-
-    def progress(fraction, message):
-        seen.append(fraction)
-        if fraction >= 0.3:
-            job.cancel()
-        return report_progress(fraction, message)
-
-    job.progress = progress
-    job.start()
-    assert job.join(timeout=120)
+    seen = run_cancelled_at(job, 0.3)
     assert job.state == "cancelled" and job.result is None
     assert any(f >= 0.3 for f in seen) and max(seen) < 1.0
     assert relit_state() == before

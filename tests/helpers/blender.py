@@ -86,3 +86,20 @@ def grey_box(location, size=0.6):
     box.name = "VBox"
     box.data.materials.append(grey_diffuse(bpy))
     return box
+
+
+def run_cancelled_at(solve, fraction, timeout=120):
+    """Start an operators.precompute.SolveJob and press Esc (``cancel``) once its progress
+    reaches ``fraction``; wait for its thread.  Returns the fractions it reported."""
+    seen = []
+    report = solve.progress
+
+    def progress(f, message):
+        seen.append(f)
+        if f >= fraction:
+            solve.cancel()
+        return report(f, message)
+    solve.progress = progress
+    solve.start()
+    assert solve.join(timeout=timeout)
+    return seen
