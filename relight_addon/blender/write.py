@@ -137,7 +137,6 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
     for node in list(tree.nodes):
         if node not in keep:
             tree.nodes.remove(node)
-    links = tree.links
     vec_src = None
     if tex is None:  # should not happen: read_scene found it; rebuild a plain one
         tex = tree.nodes.new("ShaderNodeTexImage")

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .envmap import (FACE_AXES, cube_mips, cube_texel_coords, equirect_directions,
-                     equirect_solid_angles, face_directions)
+from .envmap import (FACE_AXES, cube_mips, equirect_directions, equirect_solid_angles,
+                     face_directions)
 
 # real SH basis constants (bands 0-2)
 _Y0 = 0.5 * np.sqrt(1 / np.pi)

@@ -167,7 +167,7 @@ def merge(images, times, response) -> dict:
             den[..., c] += wc
     with np.errstate(invalid="ignore", divide="ignore"):
         lne = num / den
-    short, long_ = images[0], images[-1]
+    short = images[0]
     sat = (den == 0) & (short > Z_HIGH)
     black = (den == 0) & ~sat
     lne[sat] = np.broadcast_to(g[Z_HIGH] - lnt[0], shape)[sat]
