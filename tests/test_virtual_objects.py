@@ -15,7 +15,7 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-from helpers.blender import grey_box  # noqa: E402
+from helpers.blender import add_point, grey_box  # noqa: E402
 from helpers.office import (LUM, SAMPLES, SIZE, map_images, photographed_office, relit_office)  # noqa: E402
 
 
@@ -23,10 +23,19 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
     from relight_addon.core.texture.colour import delta_e_2000, linear_rgb_to_lab
     from scenes.bake import bake_lighting
 
+    lamp = ("Virtual", (3.0, 1.2, 1.4), 100.0)
+    truths = {}
+
     def with_the_box(info, power):
         box = grey_box((3.6, 1.0, 0.3))
         truth = bake_lighting(power, samples=SAMPLES, seed=1, texture_size=SIZE,
                               objects=info.objects)
+        # and with a virtual point lamp beside it, added after the box (the lamps kept keep
+        # their maps; the new one's gets the box's change alone: virtual.add_lamps_beside_objects)
+        v = add_point(*lamp)
+        truths["lamp"] = bake_lighting(dict(power, Virtual=lamp[2]), samples=SAMPLES, seed=1,
+                                       texture_size=SIZE, objects=info.objects)
+        bpy.data.objects.remove(v)
         bpy.data.objects.remove(box)
         return truth
     info, power, truth, photo = photographed_office(with_the_box)
@@ -57,6 +66,20 @@ def test_a_virtual_box_casts_its_shadow_on_the_relit_floor():
           f"(ignoring it {d_without[shadow].mean():.2f})")
     assert d_with[visible].mean() <= 1.5
     assert d_with[shadow].mean() < 0.5 * d_without[shadow].mean()
+    # the virtual lamp beside the box: the room as Cycles lights it with both there
+    want_box = want
+    v = add_point(*lamp)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    want = np.concatenate([np.asarray(truths["lamp"][n], np.float64).reshape(-1, 3)
+                           for n in names])
+    d_lamp = de(relit_office(info))
+    near = shadow | (np.abs(want - want_box) @ LUM > 0.05 * want_box @ LUM)   # its light
+    print(f"beside the box, a virtual lamp: overall {d_lamp[visible].mean():.2f}, its shadow "
+          f"and light {d_lamp[near & visible].mean():.2f}")
+    assert d_lamp[visible].mean() <= 1.5
+    assert d_lamp[near & visible].mean() <= 2.0
+    bpy.data.objects.remove(v)
+    want = want_box
     # moving it away and updating takes its shadow away again
     box.relight_role = "ignored"
     bpy.context.view_layer.update()

@@ -95,6 +95,9 @@ class Job:
     reuse: object = None             # the solution whose mesh and links a "reuse" keeps
     drop: list = field(default_factory=list)    # virtual lamp labels whose maps are made again
     add: list = field(default_factory=list)     # virtual lamp labels whose maps are made
+    # the kept result with the objects in its maps, when they did not change: the lamps it
+    # keeps keep their maps, and only the new lamps' get the objects' change
+    with_objects: object = None
     note: str = ""                   # why the room is solved again when it might not have been
     t0: float = field(default_factory=time.perf_counter)
 
@@ -123,12 +126,16 @@ class Job:
 
 def _quick(job):
     """The kept room with its virtual lamps' maps made again where they changed, then the
-    virtual objects' change added (core/relight/virtual.py): no new solve."""
+    virtual objects' change added (core/relight/virtual.py): no new solve.  When the objects
+    did not change, the lamps kept keep their maps with the objects, and only the new lamps'
+    maps get the objects' change."""
     from ..core.progress import report
-    from ..core.relight.virtual import add_lamps, add_objects, keep_lamps
+    from ..core.relight.virtual import (add_lamps, add_lamps_beside_objects, add_objects,
+                                        keep_lamps)
     base = job.base
     names = list(base.solution.scene.lamp_names)
-    result = keep_lamps(base, [names.index(n) for n in job.drop if n in names])
+    drop = [names.index(n) for n in job.drop if n in names]
+    result = keep_lamps(base, drop)
     objects = bool(job.data.virtual.any())
     if job.add:
         report(0.0, "Lighting the room with the virtual lamps", 0.5 if objects else 1.0)
@@ -140,6 +147,10 @@ def _quick(job):
         sub = dataclasses.replace(lights, **{f.name: getattr(lights, f.name)[rows]
                                              for f in dataclasses.fields(lights)})
         sub.lamp = np.array([order[int(k)] for k in sub.lamp], np.int32)
+        if objects and job.with_objects is not None:
+            report(0.0, "Lighting the room with the virtual lamps, past the objects", 1.0)
+            return add_lamps_beside_objects(keep_lamps(job.with_objects, drop), result, sub,
+                                            list(job.add), job.data)
         result = add_lamps(result, sub, list(job.add))
     if objects:
         report(0.5 if job.add else 0.0, "Casting the virtual objects' shadows", 1.0)
@@ -295,6 +306,8 @@ def _decide(scene, job, st):
         job.action, job.base = "quick", room
         job.drop = sorted((changed | removed) & virtual)
         job.add = sorted(changed)
+        if not objects and room is not result and data.virtual.any():
+            job.with_objects = result
         return
     if gone != sorted(st.get("gone", ())) or not write.has_relight_data(scene):
         result = kept()

@@ -136,6 +136,54 @@ def keep_lamps(result, drop):
                                scene=scene)
 
 
+def _lights_only_from(scene, first):
+    """``scene`` lit by its lamps ``first``.. alone (lights, not patches: the lamps add_lamps
+    appends), renumbered from 0: no lamp patches, no emission (as :func:`_only_lights`)."""
+    rows = np.flatnonzero(scene.lights.lamp >= first)
+    lights = dataclasses.replace(scene.lights, **{f.name: getattr(scene.lights, f.name)[rows]
+                                                  for f in dataclasses.fields(scene.lights)})
+    lights.lamp = lights.lamp - first
+    new = _only_lights(scene, lights)
+    new.lamp_names = list(scene.lamp_names)[first:]
+    new.lamp_intensity = np.asarray(scene.lamp_intensity)[first:]
+    return new
+
+
+def _only_lamps_from(result, first):
+    """``result`` seen as if its lamps ``first``.. (added by :func:`add_lamps`) were its only
+    ones: what :func:`add_objects` casts the objects' change on for them alone."""
+    sol = result.solution
+    keep = np.arange(first, sol.scene.n_lamps)
+    new_sol = copy.copy(sol)
+    new_sol.scene = _lights_only_from(sol.scene, first)
+    new_sol.basis = sol.basis[keep]
+    new_sol.emission_scale = sol.emission_scale[keep]
+    if sol.light_occ is not None:
+        new_sol.light_occ, new_sol.light_unocc = sol.light_occ[keep], sol.light_unocc[keep]
+    est = result.lamps
+    lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
+        "scale", "photo_ratio", "uncertainty", "photo_weight", "equal", "nnls")})
+    direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
+    scene = None if result.scene is None else _lights_only_from(result.scene, first)
+    return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
+                               lamps=lamps, solution=new_sol, direct=direct, room=None,
+                               scene=scene)
+
+
+def add_lamps_beside_objects(with_objects, room, lights: Lights, names, scene):
+    """:func:`add_lamps` for a result whose maps already hold the virtual objects of ``scene``
+    (``with_objects``; ``room``: the same lamps without the objects).  The objects' change is
+    linear in the lamps: the new lamps' maps gain it cast for them alone, and the other lamps
+    keep their maps with the objects as they are, so that a lamp added beside objects costs
+    one lamp's change instead of every lamp's.  The copy's ``room`` is the room with the new
+    lamps, which a later Update moving the objects starts from."""
+    k0 = room.solution.scene.n_lamps
+    new_room = add_lamps(room, lights, names)
+    alone = add_objects(_only_lamps_from(new_room, k0), scene)
+    maps = {i: np.concatenate([with_objects.maps[i], alone.maps[i]]) for i in new_room.maps}
+    return dataclasses.replace(new_room, maps=maps, room=new_room)
+
+
 def add_objects(result, scene, progress=None):
     """A copy of ``result`` (the precompute of ``scene`` without its virtual objects, per
     texel) whose maps include the virtual objects of ``scene`` (``scene.virtual``): each lamp's
