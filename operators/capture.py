@@ -286,14 +286,16 @@ def _frames(path):
     return [os.path.basename(path)], iter([calibration.read_image(path)]), 1, [path]
 
 
-class RELIGHT_OT_camera_from_marker(_BoardOperator, bpy.types.Operator):
+class RELIGHT_OT_camera_from_marker(JobRunner, _BoardOperator, bpy.types.Operator):
     """Pose the active camera so that the board object is seen as in the photo (the board's
     pose from its ChArUco corners and the calibration).  On a folder or a movie, one key per
-    frame, outliers rejected and the path smoothed by quaternion slerp"""
+    frame, outliers rejected and the path smoothed by quaternion slerp (interactively in a
+    worker thread, with progress in the status bar and Esc to cancel)"""
 
     bl_idname = "relight.camera_from_marker"
     bl_label = "Camera from Marker"
     bl_options = {'REGISTER', 'UNDO'}
+    _kind = "camera pose"
 
     filepath: StringProperty(name="Photo", subtype="FILE_PATH",
                              description="A photo, a folder of frames or a movie")
@@ -326,82 +328,115 @@ class RELIGHT_OT_camera_from_marker(_BoardOperator, bpy.types.Operator):
             return "The scene has no active camera"
         return None
 
-    def execute(self, context):
+    def _prepare(self, context, *args):
+        capture = _core()[0]
+        try:
+            return MarkerJob(self, context)
+        except capture.CaptureError as ex:
+            self.report({'ERROR'}, str(ex))
+            return None
+
+    def _finish(self, context, job, result):
+        self.report({'INFO'}, job.finish(context, result))
+        return {'FINISHED'}
+
+
+class MarkerJob:
+    """Camera from Marker's inputs (``__init__``, main thread: every check that needs no frame),
+    the board found in every frame and the path smoothed (``compute``, bpy-free, any thread),
+    the camera written (``finish``, main thread)."""
+
+    label = "camera pose"
+    action = "pose"
+
+    def __init__(self, op, context):
         capture, board, calibration, pose = _core()
         bridge = _bridge()
         scene = context.scene
         camera = scene.camera
-        try:
-            if camera is None or camera.type != "CAMERA":
-                raise capture.CaptureError("The scene has no active camera")
-            spec = self.spec()
-            obj = bpy.data.objects.get(self.board_object)
-            if obj is None:
-                raise capture.CaptureError(f"No object named '{self.board_object}' (the board)")
-            lo, hi = bridge.board_bounds(obj)
-            frame = pose.board_frame(bridge.matrix_of(obj), lo, hi, spec.size)
-            calib = calibration.read_calibration(_abs(self.calibration))
-            names, images, count, paths = _frames(_abs(self.filepath))
-            det = board.Detector(spec)
-            poses, problems, size = [], {}, None
-            for i, img in enumerate(images):
-                s = (img.shape[1], img.shape[0])
-                if size is None:
-                    size = s
-                elif s != size:
-                    raise capture.CaptureError(f"The frames have different sizes ({size[0]} x "
-                                               f"{size[1]} and {s[0]} x {s[1]})")
-                name = names[i] if names else f"frame {i}"
-                d = det.detect(img)
-                try:
-                    poses.append(pose.board_pose(d, spec, calib.camera_matrix, calib.dist_coeffs))
-                except capture.CaptureError as ex:
-                    poses.append(None)
-                    problems[name] = str(ex)
+        if camera is None or camera.type != "CAMERA":
+            raise capture.CaptureError("The scene has no active camera")
+        self.camera_name = camera.name
+        self.spec = op.spec()
+        obj = bpy.data.objects.get(op.board_object)
+        if obj is None:
+            raise capture.CaptureError(f"No object named '{op.board_object}' (the board)")
+        lo, hi = bridge.board_bounds(obj)
+        self.frame = pose.board_frame(bridge.matrix_of(obj), lo, hi, self.spec.size)
+        self.calib = calibration.read_calibration(_abs(op.calibration))
+        self.names, self.images, self.count, self.paths = _frames(_abs(op.filepath))
+        self.set_intrinsics, self.background = op.set_intrinsics, op.background
+        self.smoothing = op.smoothing
+        self.start = scene.frame_start if op.frame_start < 0 else op.frame_start
+
+    def compute(self, progress=None):
+        """{poses, mats, rejected, size}; raises CaptureError on frames it cannot use."""
+        import numpy as np
+        capture, board, _, pose = _core()
+        det = board.Detector(self.spec)
+        calib = self.calib
+        poses, problems, size = [], {}, None
+        for i, img in enumerate(self.images):
+            if progress is not None:
+                progress(i / max(self.count, i + 1),
+                         f"Finding the board in frame {i + 1} of {max(self.count, i + 1)}")
+            s = (img.shape[1], img.shape[0])
             if size is None:
-                raise capture.CaptureError("No frame could be read")
-            if tuple(size) != tuple(calib.image_size):
-                raise capture.CaptureError(
-                    f"The photo is {size[0]} x {size[1]} but the calibration is for "
-                    f"{calib.image_size[0]} x {calib.image_size[1]}")
-            if len(poses) == 1 and poses[0] is None:
-                raise capture.CaptureError(f"No board pose in the photo: {problems.popitem()[1]}")
-            valid = [p is not None for p in poses]
-            if not any(valid):
-                raise capture.CaptureError(f"No board found in any of the {len(poses)} frames")
-            import numpy as np
-            mats = np.stack([pose.camera_world_matrix(frame, p) if p is not None else np.eye(4)
-                             for p in poses])
-            rejected = np.zeros(len(poses), bool)
-            if len(poses) > 1:
-                mats, rejected = pose.smooth_path(mats, np.array(valid), self.smoothing)
-        except capture.CaptureError as ex:
-            return self.fail(str(ex))
-        # -- nothing changed above; from here on the scene is written --
+                size = s
+            elif s != size:
+                raise capture.CaptureError(f"The frames have different sizes ({size[0]} x "
+                                           f"{size[1]} and {s[0]} x {s[1]})")
+            name = self.names[i] if self.names else f"frame {i}"
+            d = det.detect(img)
+            try:
+                poses.append(pose.board_pose(d, self.spec, calib.camera_matrix,
+                                             calib.dist_coeffs))
+            except capture.CaptureError as ex:
+                poses.append(None)
+                problems[name] = str(ex)
+        if size is None:
+            raise capture.CaptureError("No frame could be read")
+        if tuple(size) != tuple(calib.image_size):
+            raise capture.CaptureError(
+                f"The photo is {size[0]} x {size[1]} but the calibration is for "
+                f"{calib.image_size[0]} x {calib.image_size[1]}")
+        if len(poses) == 1 and poses[0] is None:
+            raise capture.CaptureError(f"No board pose in the photo: {problems.popitem()[1]}")
+        valid = [p is not None for p in poses]
+        if not any(valid):
+            raise capture.CaptureError(f"No board found in any of the {len(poses)} frames")
+        mats = np.stack([pose.camera_world_matrix(self.frame, p) if p is not None else np.eye(4)
+                         for p in poses])
+        rejected = np.zeros(len(poses), bool)
+        if len(poses) > 1:
+            mats, rejected = pose.smooth_path(mats, np.array(valid), self.smoothing)
+        return dict(poses=poses, mats=mats, rejected=rejected, size=size)
+
+    def finish(self, context, out):
+        """Write the camera (intrinsics, pose or keys, background photo); the report."""
+        import numpy as np
+        bridge = _bridge()
+        scene = context.scene
+        camera = bpy.data.objects[self.camera_name]
+        poses, mats, rejected = out["poses"], out["mats"], out["rejected"]
         if self.set_intrinsics:
-            bridge.set_intrinsics(camera, scene, calib.camera_matrix, size)
+            bridge.set_intrinsics(camera, scene, self.calib.camera_matrix, out["size"])
         if len(poses) == 1:
             bridge.set_matrix_world(camera, mats[0])
-            if self.background and paths:
-                bridge.set_camera_photo(camera, paths[0])
+            if self.background and self.paths:
+                bridge.set_camera_photo(camera, self.paths[0])
             p = poses[0]
             dist = float(np.linalg.norm(p.t))
-            self.report({'INFO'}, f"Posed '{camera.name}' from {p.n} board corners "
-                                  f"(RMS {p.rms:.3f} px, board {dist:.2f} m away)")
-            return {'FINISHED'}
-        start = scene.frame_start if self.frame_start < 0 else self.frame_start
-        frames = np.arange(len(poses)) + start
+            return (f"Posed '{camera.name}' from {p.n} board corners (RMS {p.rms:.3f} px, board "
+                    f"{dist:.2f} m away)")
+        frames = np.arange(len(poses)) + self.start
         bridge.key_path(camera, mats, frames)
         used = [p for p in poses if p is not None]
         rms = float(np.median([p.rms for p in used]))
-        self.report({'INFO'}, f"Keyed '{camera.name}' on frames {frames[0]}-{frames[-1]}: "
-                              f"{len(used) - int(rejected.sum())} poses used, "
-                              f"{len(poses) - len(used)} frames without a board, "
-                              f"{int(rejected.sum())} rejected as outliers, filled by slerp "
-                              f"(median RMS {rms:.3f} px)")
-        return {'FINISHED'}
-
-
+        return (f"Keyed '{camera.name}' on frames {frames[0]}-{frames[-1]}: "
+                f"{len(used) - int(rejected.sum())} poses used, {len(poses) - len(used)} frames "
+                f"without a board, {int(rejected.sum())} rejected as outliers, filled by slerp "
+                f"(median RMS {rms:.3f} px)")
 
 
 # ------------------------------------------------------------------------------------------

@@ -237,6 +237,29 @@ def test_camera_from_marker_sequence(tmp_path):
         assert angle < 0.3 and dist < 0.01, (i, angle, dist)   # frame 4 from its neighbours
 
 
+def test_camera_from_marker_cancelled_midway_changes_nothing(tmp_path):
+    """Esc while the board is found frame by frame (the worker's progress raises): the camera
+    keeps its pose, its lens and no keys."""
+    import importlib
+    from helpers.blender import run_cancelled_at
+    scene, cam, board, calib = _pose_scene(tmp_path)
+    centre = np.array(board.matrix_world)[:3, 3]
+    normal = np.array(board.matrix_world)[:3, 2]
+    frames = [_photo_of(board, sc.look_at(centre + 2.0 * normal + [0.05 * i, 0, 0], centre))
+              for i in range(8)]
+    folder = _write(tmp_path / "seq", frames, "frame")
+    state = _camera_state(scene, cam)
+    ops = importlib.import_module("relight_ext.operators.capture")
+    precompute = importlib.import_module("relight_ext.operators.precompute")
+    op = type("Op", (), dict(filepath=folder, calibration=calib, board_object="Board",
+                             set_intrinsics=True, background=True, smoothing=0.3,
+                             frame_start=-1, spec=lambda self: POSE_SPEC))()
+    solve = precompute.SolveJob(ops.MarkerJob(op, bpy.context))
+    seen = run_cancelled_at(solve, 0.3)
+    assert solve.state == "cancelled" and solve.result is None and max(seen) < 1.0
+    assert _camera_state(scene, cam) == state and cam.animation_data is None
+
+
 def test_camera_from_marker_movie(tmp_path):
     """A movie (MJPG AVI, what OpenCV writes everywhere): one key per frame."""
     scene, cam, board, calib = _pose_scene(tmp_path)
