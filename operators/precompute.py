@@ -103,9 +103,10 @@ def busy_reason():
     job = _ACTIVE["job"]
     if job is None or not job.alive:
         return None
+    label = getattr(job, "label", "precompute")
     if job.state == "running" and not job.cancelled:
-        return f"A {job.label} is running: wait for it, or press Esc to cancel it"
-    return f"The cancelled {job.label} is stopping: a moment"
+        return f"A {label} is running: wait for it, or press Esc to cancel it"
+    return f"The cancelled {label} is stopping: a moment"
 
 
 def _report_outcome(op, outcome):

@@ -430,8 +430,10 @@ def test_many_spheres_still_compile_in_cycles(room):
     roles = importlib.import_module(PKG + ".relight_addon.blender.roles")
     monkey.relight_spheres = 512
     assert monkey.relight_spheres == roles.MAX_SPHERES == 128
-    monkey["relight_spheres"] = 512
-    assert roles.sphere_count(monkey) == 128
+    raw = bpy.data.objects.new("Raw count", monkey.data)     # a script's plain property
+    raw["relight_spheres"] = 512
+    assert roles.sphere_count(raw) == 128
+    bpy.data.objects.remove(raw)
     monkey.relight_spheres = 8
     assert bpy.ops.relight.update() == {"FINISHED"}
     assert before > 0 and 0.8 * before < after <= before * 1.01
