@@ -5,6 +5,8 @@ a user would otherwise make).  Writes benchmarks/results/ar_composite.md and
 ar_composite_raw.json.
 
     python benchmarks/bench_ar_composite.py [--res 120 90] [--samples 128] [--cases ...]
+    python benchmarks/bench_ar_composite.py --res 400 300 --samples 256 --ours 32 --eevee 0 \
+        --cases ground/sphere/sunrise --name ar_composite_400
 
 Each render runs in a fresh bpy process (tests/ar_composite_job.py) and is cached on disk
 (tests/ar_composite.py: ``$RELIGHT_BAKE_CACHE`` or ``.cache/bakes``).  Scores: mean CIEDE2000
@@ -39,6 +41,8 @@ def main():
     ap.add_argument("--ours", type=int, default=16, help="our Cycles render's samples")
     ap.add_argument("--eevee", type=int, default=8, help="our EEVEE render's samples (0: none)")
     ap.add_argument("--cases", nargs="*", default=list(CASES))
+    ap.add_argument("--name", default="ar_composite",
+                    help="results file stem (another resolution: another file)")
     a = ap.parse_args()
     hdris = T.bundled_hdris()
     res, n = tuple(a.res), a.samples
@@ -64,7 +68,7 @@ def main():
         rows.append(row)
         print(json.dumps(row), flush=True)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "ar_composite_raw.json").write_text(json.dumps(
+    (RESULTS / f"{a.name}_raw.json").write_text(json.dumps(
         {"res": res, "samples": n, "python": platform.python_version(), "rows": rows},
         indent=1))
     lines = [f"# AR composite vs Cycles truth ({res[0]} x {res[1]}, truth / photo / catcher at "
@@ -97,7 +101,7 @@ def main():
               "- Times: the render's process CPU seconds (all its threads), the wall seconds "
               "beside them carry the shared machine's load of that moment; Set Up once per "
               "scene (environment, receiver view, sphere fits)."]
-    (RESULTS / "ar_composite.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / f"{a.name}.md").write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

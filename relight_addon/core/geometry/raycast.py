@@ -169,6 +169,8 @@ class Occluder:
         with np.errstate(invalid="ignore", over="ignore"):
             norm = np.sqrt(np.einsum("ij,ij->i", d, d))
             valid = np.isfinite(o).all(1) & np.isfinite(norm) & (norm > 0) & (tmax >= 0)
+        if valid.all():                    # the usual case: no gathered copies of 4M rays
+            return self._first_hit_prim(o, d / norm[:, None], tmax)
         idx = np.flatnonzero(valid)
         if len(idx):
             t[idx], prim[idx] = self._first_hit_prim(o[idx], d[idx] / norm[idx, None], tmax[idx])
