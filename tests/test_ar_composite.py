@@ -136,3 +136,20 @@ def test_chain_move_add_update_save_reopen():
         s_paste["shadow"], (s_first, s_second, s_paste)
     # the reopened file renders what the live session did (no Python ran before its render)
     assert np.abs(out["reopened"] - out["second"]).max() < 0.02
+
+
+@pytest.mark.slow            # a 400 x 300 photo and composite (about half a minute here)
+def test_the_objects_reflections_of_the_ground_behind_the_camera_stay_finite():
+    """At 400 x 300 the sphere's reflections of the ground behind the camera read the photo
+    through a projection that runs to 1e7 there; Cycles' image lookup returned values of up to
+    1e6 (80 object pixels above 100 at 32 samples, the denoiser then spread them over the
+    whole sphere: 80 CIEDE2000 on it).  The receivers' UV is held in the frame: the object is
+    as bright as the photo's light makes it (the truth's brightest pixel: 1.9)."""
+    path = HDRIS["sunrise"]
+    res = (400, 300)
+    photo = C.photo("ground", "sphere", path, res, 16)
+    ours = C.ours("ground", "sphere", path, res, engine="CYCLES", samples=8, photo_samples=16)
+    on = photo["mask"] > 0.5
+    img = ours["image"]
+    assert np.isfinite(img).all()
+    assert img[on].max() < 5.0, img[on].max()

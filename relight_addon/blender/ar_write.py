@@ -53,7 +53,13 @@ def receiver_material(name, camera, photo, key):
     cam = ar_nodes.group_node(b, camera, Position=geo.outputs["Position"], Point=1.0)
     tex = b.node("ShaderNodeTexImage", "Photo", image=photo, interpolation="Linear",
                  extension="EXTEND")
-    b.link(cam.outputs["UV"], tex.inputs["Vector"])
+    # the UV held in the frame: behind the camera (and far outside its frame) the projection
+    # runs to 1e7, and Cycles' image lookup returned values of up to 1e6 there, which
+    # fireflied the objects' reflections (400 x 300: 80 object pixels above 100); EXTEND
+    # shows the frame's edge either way
+    uv = b.vmath("MINIMUM", b.vmath("MAXIMUM", cam.outputs["UV"], (0.0, 0.0, 0.0)),
+                 (1.0, 1.0, 0.0))
+    b.link(uv, tex.inputs["Vector"])
     b.column()
     emit = b.node("ShaderNodeEmission")
     b.link(tex.outputs["Color"], emit.inputs["Color"])
