@@ -111,16 +111,13 @@ def add_lamps(result, lights: Lights, names, seed=0):
                                room=None, scene=texel_scene if result.scene is not None else None)
 
 
-def keep_lamps(result, drop):
-    """A copy of ``result`` without the lamps ``drop`` (indices of lamps that are lights, e.g.
-    virtual lamps to be added again with :func:`add_lamps`)."""
+def _lamps_of(result, keep, scene_of):
+    """A copy of ``result`` with only the lamps ``keep`` (indices), in that order: the maps, the
+    bases, the lights' leaf light and the estimate's rows; ``scene_of(scene)`` gives the
+    solution's and the texels' scenes with those lamps."""
     sol = result.solution
-    drop = sorted(set(int(k) for k in drop))
-    if not drop:
-        return result
-    keep = np.array([k for k in range(sol.scene.n_lamps) if k not in drop])
     new_sol = copy.copy(sol)
-    new_sol.scene = sol.scene.without_lamps(drop)
+    new_sol.scene = scene_of(sol.scene)
     new_sol.basis = sol.basis[keep]
     new_sol.emission_scale = sol.emission_scale[keep]
     if sol.light_occ is not None:
@@ -130,10 +127,20 @@ def keep_lamps(result, drop):
         "scale", "photo_ratio", "uncertainty", "photo_weight", "equal", "nnls")})
     direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
     scene = None if result.scene is None else (
-        new_sol.scene if result.scene is sol.scene else result.scene.without_lamps(drop))
+        new_sol.scene if result.scene is sol.scene else scene_of(result.scene))
     return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
                                lamps=lamps, solution=new_sol, direct=direct, room=None,
                                scene=scene)
+
+
+def keep_lamps(result, drop):
+    """A copy of ``result`` without the lamps ``drop`` (indices of lamps that are lights, e.g.
+    virtual lamps to be added again with :func:`add_lamps`)."""
+    drop = sorted(set(int(k) for k in drop))
+    if not drop:
+        return result
+    keep = np.array([k for k in range(result.solution.scene.n_lamps) if k not in drop])
+    return _lamps_of(result, keep, lambda scene: scene.without_lamps(drop))
 
 
 def _lights_only_from(scene, first):
@@ -152,22 +159,8 @@ def _lights_only_from(scene, first):
 def _only_lamps_from(result, first):
     """``result`` seen as if its lamps ``first``.. (added by :func:`add_lamps`) were its only
     ones: what :func:`add_objects` casts the objects' change on for them alone."""
-    sol = result.solution
-    keep = np.arange(first, sol.scene.n_lamps)
-    new_sol = copy.copy(sol)
-    new_sol.scene = _lights_only_from(sol.scene, first)
-    new_sol.basis = sol.basis[keep]
-    new_sol.emission_scale = sol.emission_scale[keep]
-    if sol.light_occ is not None:
-        new_sol.light_occ, new_sol.light_unocc = sol.light_occ[keep], sol.light_unocc[keep]
-    est = result.lamps
-    lamps = dataclasses.replace(est, **{f: getattr(est, f)[keep] for f in (
-        "scale", "photo_ratio", "uncertainty", "photo_weight", "equal", "nnls")})
-    direct = None if result.direct is None else {i: d[keep] for i, d in result.direct.items()}
-    scene = None if result.scene is None else _lights_only_from(result.scene, first)
-    return dataclasses.replace(result, maps={i: m[keep] for i, m in result.maps.items()},
-                               lamps=lamps, solution=new_sol, direct=direct, room=None,
-                               scene=scene)
+    keep = np.arange(first, result.solution.scene.n_lamps)
+    return _lamps_of(result, keep, lambda scene: _lights_only_from(scene, first))
 
 
 def add_lamps_beside_objects(with_objects, room, lights: Lights, names, scene):
