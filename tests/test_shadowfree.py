@@ -147,8 +147,8 @@ def test_user_power_30_percent_off(office):
     # differently; within 10 % before; bpy 5.2.3's bakes, photo seeds 0 / 2 / 4: 12.2 / 9.7 /
     # 9.9 %, the photo's noise)
     assert abs(got / true_ratio - 1) < 0.13, (got, res.lamps)
-    s = res.exitance_scale
-    assert abs((s[0] / s[1]) / true_ratio - 1) < 0.12
+    s = res.exitance_scale                 # "photo" mode takes that estimate: the same 13 %
+    assert abs((s[0] / s[1]) / true_ratio - 1) < 0.13
 
 
 def test_original_lighting_matches_the_truth(office, results):
