@@ -1,27 +1,49 @@
 # Relight: developer commands. See README.md.
 #
-#   make test        create .venv on first use (bpy wheel + runtime + test deps), run pytest
-#   make test-quick  the tests not marked slow (under 5 minutes)
+#   make test        both Blender lines: the whole suite on bpy 5.2 (Python 3.13, .venv), then
+#                    LTS_TESTS on bpy 4.5 LTS (Python 3.11, .venv-lts); each venv is created on
+#                    first use (bpy wheel + runtime + test deps)
+#   make test-main   the whole suite on bpy 5.2 only
+#   make test-quick  the tests not marked slow (under 5 minutes), on bpy 5.2
 #   make layers      the import contracts of .importlinter (import-linter; make test checks them too)
 #   make demo        solve the embedded Cornell box (out/cornell.png), then relight the photographed
 #                    office through the operators: a lamp off, a virtual lamp and a virtual box
 #                    (EEVEE frames, Cycles truth, out/demo_side_by_side.png, out/demo.blend); writes
 #                    under out/ only (`make demo-results` also updates benchmarks/results/)
-#   make extension   download the runtime wheels per platform, build dist/relight-*-<platform>.zip
-#   make test-lts    the same tests against Blender 4.2 LTS (bpy 4.2) in .venv-lts
+#   make extension   download the runtime wheels per platform and Python (cp311, cp313), build
+#                    dist/relight-*-<platform>.zip (one zip per platform serves both lines)
+#   make test-lts    LTS_TESTS against Blender 4.5 LTS (bpy 4.5) in .venv-lts
 #   make test-cache  render again the Cycles bakes and Mitsuba references shipped in
 #                    tests/data/cache (after a change to a test scene or a bpy/Mitsuba update)
 #   make clean       remove build output and caches (keeps the venvs; `make distclean` removes them)
 
-PYTHON  ?= python3.11
+# Blender 5.2 runs Python 3.13, Blender 4.5 LTS Python 3.11: one interpreter per line (a bpy
+# wheel is built for one Python).  pyenv's 3.13 by its full path (its bare `python3.13` shim
+# refuses when 3.13 is not pyenv's selected version), else a python3.13 on PATH.
+PYENV_ROOT_DIR := $(shell pyenv root 2>/dev/null)
+PYTHON     ?= $(firstword $(wildcard $(PYENV_ROOT_DIR)/versions/3.13*/bin/python3.13) python3.13)
+PYTHON_LTS ?= python3.11
 VENV    ?= .venv
 LTS     ?= .venv-lts
 # the slowest tests listed at the end, so that CI's log shows where the suite's time goes
 PYTEST_ARGS ?= -q -rs -p no:cacheprovider --durations=25
 # two worker processes, each taking whole test files (a file's module fixtures, Cycles bakes
-# and scans, are built once), the longest files first (conftest.py's LONGEST_FIRST); the LTS
-# run stays in one process (bpy 4.2's exit, conftest.py)
+# and scans, are built once), the longest files first (conftest.py's LONGEST_FIRST)
 PYTEST_JOBS ?= -n 2 --dist loadfile --no-loadscope-reorder
+
+# The LTS line runs the tests whose result could differ between Blender 4.5 and 5.2: what talks
+# to Blender's API where it changed (node trees and materials read and written, lights, EEVEE,
+# the compositor, the gpu module, undo, save and reopen, operators and panels, the extension
+# zip installed into Blender) rather than the bpy-free core, which is the same code on the same
+# numpy maths.  AR mode needs Blender 5.0's compositor: on 4.5 its refusal is tested
+# (test_ar_refused.py).  The Cycles truth the tests compare against is rendered by each line's own
+# Cycles (bakes are keyed by bpy's version; both lines' bakes are shipped in tests/data/cache).
+LTS_TESTS ?= tests/test_extension_install.py tests/test_bridge_read.py \
+	tests/test_precompute_operator.py tests/test_user_edits.py tests/test_virtual_lamps.py \
+	tests/test_virtual_objects.py tests/test_virtual_emissive.py tests/test_sphere_nodes.py \
+	tests/test_eevee_light.py tests/test_ar_refused.py \
+	tests/test_capture_operators.py tests/test_messages.py tests/test_progress.py \
+	tests/test_data_safety.py
 
 REQ_COMMON := requirements/runtime.txt requirements/test.txt
 REQ_MAIN   := requirements/blender.txt $(REQ_COMMON)
@@ -31,9 +53,17 @@ REQ_LTS    := requirements/blender-lts.txt $(REQ_COMMON)
 STAMP     := $(VENV)/.requirements-stamp
 STAMP_LTS := $(LTS)/.requirements-stamp
 
-.PHONY: test test-quick layers demo demo-results extension wheels test-lts test-cache validate clean distclean venv venv-lts
+.PHONY: test test-main test-quick layers demo demo-results extension wheels test-lts test-cache validate clean distclean venv venv-lts
 
-test: $(STAMP)
+# both lines even when the first fails (CI's log then shows both); the status fails if either does
+test: $(STAMP) $(STAMP_LTS)
+	@status=0; \
+	$(MAKE) --no-print-directory test-main || status=1; \
+	$(MAKE) --no-print-directory test-lts || status=1; \
+	exit $$status
+
+test-main: $(STAMP)
+	$(VENV)/bin/python -c "import bpy, sys; print('main line: bpy', bpy.app.version_string, 'python', sys.version.split()[0])"
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
 
 # the tests not marked slow (conftest.py): under 5 minutes, between edits
@@ -57,34 +87,43 @@ venv-lts: $(STAMP_LTS)
 
 $(STAMP): $(REQ_MAIN)
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	@$(VENV)/bin/python -c "import sys; sys.exit(sys.version_info[:2] != (3, 13))" || \
+		{ echo "$(VENV) is not Python 3.13 (bpy 5.2): remove it (make distclean)"; exit 1; }
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
 	$(VENV)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_MAIN))
 	@touch $@
 
-# bpy 4.2 needs its own venv: one bpy per interpreter.
+# bpy 4.5 needs its own venv and Python: one bpy per interpreter.
 $(STAMP_LTS): $(REQ_LTS)
-	@test -x $(LTS)/bin/python || $(PYTHON) -m venv $(LTS)
+	@test -x $(LTS)/bin/python || $(PYTHON_LTS) -m venv $(LTS)
 	$(LTS)/bin/python -m pip install --disable-pip-version-check -q --upgrade pip
 	$(LTS)/bin/python -m pip install --disable-pip-version-check -q $(addprefix -r ,$(REQ_LTS))
+	@# bpy 4.5 hangs at exit (Blender's bug, tools/bpy_exit_hook.py): every Python of the venv
+	@# loads the hook that leaves before bpy's static destructors
+	echo "import runpy; runpy.run_path('$(CURDIR)/tools/bpy_exit_hook.py')" > \
+		"$$($(LTS)/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/relight_bpy_exit.pth"
 	@touch $@
 
 test-lts: $(STAMP_LTS)
-	$(LTS)/bin/python -c "import bpy; print('bpy', bpy.app.version_string)"
-	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) tests
+	$(LTS)/bin/python -c "import bpy, sys; print('LTS line: bpy', bpy.app.version_string, 'python', sys.version.split()[0])"
+	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) $(LTS_TESTS)
 
-# every test, from empty caches of its own (a developer's .cache, benchmarks' references
-# included, is left alone), then what they rendered becomes the shipped cache (conftest.py)
+# every test of both lines, from empty caches of their own (a developer's .cache, benchmarks'
+# references included, is left alone), then what they rendered becomes the shipped cache
+# (conftest.py): bakes are keyed by bpy's version, so each line ships its own
 FRESH_CACHE := $(CURDIR)/.cache/test-cache
-test-cache: $(STAMP)
+FRESH_ENV   := RELIGHT_BAKE_CACHE=$(FRESH_CACHE)/bakes RELIGHT_MITSUBA_CACHE=$(FRESH_CACHE)/mitsuba
+test-cache: $(STAMP) $(STAMP_LTS)
 	rm -rf $(FRESH_CACHE) tests/data/cache
-	RELIGHT_BAKE_CACHE=$(FRESH_CACHE)/bakes RELIGHT_MITSUBA_CACHE=$(FRESH_CACHE)/mitsuba \
-		$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests \
+	$(FRESH_ENV) $(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests \
 		--ignore=tests/test_shipped_references.py
+	$(FRESH_ENV) $(LTS)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) $(LTS_TESTS)
 	mkdir -p tests/data/cache
 	cp -r $(FRESH_CACHE)/bakes $(FRESH_CACHE)/mitsuba tests/data/cache/
-	$(VENV)/bin/python -c "import bpy, json, importlib.metadata as m; print(json.dumps({'bpy': \
-		bpy.app.version_string.split()[0], 'mitsuba': m.version('mitsuba')}, indent=1))" \
-		> tests/data/cache/versions.json
+	$(VENV)/bin/python -c "import json, subprocess, importlib.metadata as m; print(json.dumps({'bpy': \
+		[subprocess.check_output([p, '-c', 'import importlib.metadata as m; print(m.version(\"bpy\"))'], \
+		text=True).strip() for p in ('$(VENV)/bin/python', '$(LTS)/bin/python')], \
+		'mitsuba': m.version('mitsuba')}, indent=1))" > tests/data/cache/versions.json
 
 validate: $(STAMP)
 	$(VENV)/bin/python tools/blender_ext.py validate .

@@ -29,6 +29,10 @@ class RELIGHT_OT_ar_setup(JobRunner, bpy.types.Operator):
     bl_options = {'UNDO'}
     _kind = "AR set up"
 
+    @classmethod
+    def disabled_reason(cls, context):
+        return _ar().unsupported_reason() or super().disabled_reason(context)
+
     def _prepare(self, context, preset=None, correction=None):
         from ..relight_addon.blender import pipeline
         try:

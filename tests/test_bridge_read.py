@@ -202,6 +202,24 @@ def test_area_light_polygons(shape, size, size_y, area):
     assert np.allclose(scene.corners.reshape(-1, 3).mean(axis=0), obj.location, atol=1e-6)
 
 
+def test_light_nodes_warned_only_when_they_change_the_light():
+    """Blender 5.x gives every new light a node tree (a white, strength-1 Emission): that one is
+    no warning; a tree that changes the light (here its strength) is, as it is ignored."""
+    mesh_object("floor", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [(0, 1, 2, 3)])
+    plain = bpy.data.lights.new("plain", "POINT")
+    plain.energy = 10.0
+    link(bpy.data.objects.new("plain", plain))
+    noded = bpy.data.lights.new("noded", "POINT")
+    noded.energy = 10.0
+    noded.use_nodes = True                    # 4.5: no tree before this; 5.x: on already
+    emit = next(n for n in noded.node_tree.nodes if n.bl_idname == "ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 2.0
+    link(bpy.data.objects.new("noded", noded))
+    _, report = read_scene(bpy.context)
+    nodes = [w for w in report.warnings if "light nodes" in w]
+    assert nodes == ["Light 'noded': light nodes are ignored"], report.warnings
+
+
 def test_lamps_of_every_type_and_lamps_off():
     """Point and sun lights become core Lights, area lights patches (or Lights with a spread);
     a lamp at 0 W is kept, off in the photo, at a reference power of 1 W."""

@@ -93,7 +93,11 @@ def test_manifest_validates():
 def test_manifest_fields():
     assert MANIFEST["id"] == ADDON_ID
     assert MANIFEST["type"] == "add-on"
-    assert MANIFEST["blender_version_min"] >= "4.2.0"
+    # the range says what is tested: this bpy (4.5 LTS or 5.2, the two lines of `make test`)
+    # lies inside it, the maximum exclusive
+    version = lambda s: tuple(int(p) for p in s.split("."))  # noqa: E731
+    assert version(MANIFEST["blender_version_min"]) <= tuple(bpy.app.version)
+    assert tuple(bpy.app.version) < version(MANIFEST["blender_version_max"])
     for reason in MANIFEST.get("permissions", {}).values():
         assert not reason.endswith("."), "Blender rejects permission reasons ending with a period"
     # Never bundle numpy: Blender ships its own and two copies break at import.
@@ -114,6 +118,16 @@ def test_zip_contents(extension_zip):
     assert not leaked, leaked
     wheels = [n for n in names if n.startswith("wheels/")]
     assert not [w for w in wheels if "numpy" in os.path.basename(w).lower()]
+    # every compiled runtime library for both Pythons of the lines (4.5: cp311, 5.x: cp313),
+    # or one stable-ABI wheel (abi3) for both
+    tags: dict[str, set[str]] = {}
+    for w in wheels:
+        name, *_, python, abi, _platform = os.path.basename(w)[:-4].split("-")
+        tags.setdefault(name.lower(), set()).add("abi3" if abi == "abi3" else python)
+    compiled = {n: t for n, t in tags.items() if t != {"py3"}}
+    assert compiled.keys() >= {"scipy", "xatlas", "fast_simplification", "pillow", "embreex",
+                               "opencv_contrib_python_headless"}, tags
+    assert all(t == {"abi3"} or t >= {"cp311", "cp313"} for t in compiled.values()), tags
 
 
 def _absolute_local_imports(path: str) -> list[str]:
@@ -228,3 +242,5 @@ def test_install_enable_run(extension_zip, tmp_path):
     installed = {d.split("-")[0].lower() for d in result["site_packages"]}
     expected = {w.split("-")[0].lower() for w in wheels}
     assert expected <= installed, sorted(expected - installed)
+    # one copy each: Blender took this Python's wheel of each library, not the other line's
+    assert len(result["site_packages"]) == len(installed), result["site_packages"]

@@ -25,6 +25,7 @@ def _panel():
     obj.scale = (0.6, 0.4, 1.0)
     obj.rotation_euler = (np.pi, 0.0, 0.0)           # the plane's normal points down
     mat = bpy.data.materials.new("PanelGlow")
+    mat.use_nodes = True            # Blender 4.5: a new material has no node tree before this
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)

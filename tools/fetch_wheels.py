@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
 """Download the extension's runtime wheels for every platform Blender builds for.
 
-Usage: python tools/fetch_wheels.py [--dest wheels] [--python-version 3.11]
+Usage: python tools/fetch_wheels.py [--dest wheels] [--python-version 3.11 --python-version 3.13]
 
 Reads the pinned requirements in requirements/runtime.txt and requirements/bundle-extra.txt,
 downloads unmodified PyPI wheels (``pip download --only-binary=:all: --no-deps``) for each
-platform of blender_manifest.toml into ``wheels/``, and never numpy (Blender ships it).
-A package without a wheel for a platform is skipped with a message (embreex, for example,
-where the core falls back to mathutils.bvhtree). Then checks, per platform, that the
+platform of blender_manifest.toml and each Python of PYTHON_VERSIONS (default) into ``wheels/``,
+and never numpy (Blender ships it).  One zip per platform then holds the wheels of both Pythons:
+Blender installs only those matching its own Python and platform (bl_pkg's wheel filter,
+Blender 4.2 and later), so the same zip serves Blender 4.5 LTS (3.11) and 5.x (3.13).
+A package without a wheel for a platform and Python is skipped with a message (embreex, for example,
+where the core falls back to mathutils.bvhtree). Then checks, per platform and Python, that the
 ``Requires-Dist`` of every downloaded wheel is satisfied by another downloaded wheel or by a
 module Blender ships, so a missing transitive dependency is caught here and not in Blender.
 
@@ -36,7 +39,10 @@ except ImportError:  # pip vendors packaging
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REQUIREMENT_FILES = ("requirements/runtime.txt", "requirements/bundle-extra.txt")
 
-# Modules that Blender's own Python provides (4.2 to 5.0); never bundled.
+# The Pythons of the Blender lines the manifest accepts: 4.5 LTS (3.11), 5.x (3.13).
+PYTHON_VERSIONS = ("3.11", "3.13")
+
+# Modules that Blender's own Python provides (4.5 to 5.x); never bundled.
 PROVIDED_BY_BLENDER = {
     "numpy", "requests", "certifi", "charset-normalizer", "idna", "urllib3", "zstandard",
     "cython", "autopep8", "pycodestyle",
@@ -132,25 +138,28 @@ def check_closure(platform: str, wheel_paths: list[str], python_version: str) ->
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dest", default=os.path.join(ROOT, "wheels"))
-    parser.add_argument("--python-version", default="3.11")
+    parser.add_argument("--python-version", action="append", dest="python_versions",
+                        help=f"a Python to fetch for, repeatable (default: {', '.join(PYTHON_VERSIONS)})")
     parser.add_argument("--platform", action="append", choices=sorted(PLATFORMS),
                         help="limit to these Blender platforms (default: all)")
     args = parser.parse_args(argv)
 
     platforms = args.platform or list(PLATFORMS)
+    pythons = args.python_versions or list(PYTHON_VERSIONS)
     reqs = read_requirements(ROOT)
     os.makedirs(args.dest, exist_ok=True)
     wanted: set[str] = set()
-    per_platform: dict[str, list[str]] = {p: [] for p in platforms}
-    missing: dict[str, list[str]] = {p: [] for p in platforms}
+    lines = [(p, py) for p in platforms for py in pythons]
+    per_line: dict[tuple[str, str], list[str]] = {line: [] for line in lines}
+    missing: dict[tuple[str, str], list[str]] = {line: [] for line in lines}
     failed = False
 
-    for platform in platforms:
+    for platform, python in lines:
         for req in reqs:
             got = None
             for rung, tags in enumerate(PLATFORMS[platform]):
                 with tempfile.TemporaryDirectory() as tmp:
-                    ok, log = pip_download(str(req), tags, args.python_version, tmp)
+                    ok, log = pip_download(str(req), tags, python, tmp)
                     files = sorted(f for f in os.listdir(tmp) if f.endswith(".whl")) if ok else []
                     for f in files:
                         shutil.copy2(os.path.join(tmp, f), os.path.join(args.dest, f))
@@ -160,14 +169,14 @@ def main(argv=None) -> int:
                         print(f"  note: {platform}: {req} needs {tags[0]} (newer OS than Blender's minimum)")
                     break
             if got is None:
-                missing[platform].append(req.name)
+                missing[platform, python].append(req.name)
                 level = "skip" if canonicalize_name(req.name) in OPTIONAL else "ERROR"
                 failed |= level == "ERROR"
-                print(f"  {level}: no {platform} wheel for {req} (python {args.python_version})")
+                print(f"  {level}: no {platform} wheel for {req} (python {python})")
                 continue
             for f in got:
                 wanted.add(f)
-                per_platform[platform].append(f)
+                per_line[platform, python].append(f)
 
     # Remove wheels left over from older pins.
     for f in sorted(os.listdir(args.dest)):
@@ -175,17 +184,17 @@ def main(argv=None) -> int:
             os.remove(os.path.join(args.dest, f))
             print(f"  removed stale {f}")
 
-    print("\nWheels per platform:")
-    for platform in platforms:
-        files = per_platform[platform]
+    print("\nWheels per platform and Python:")
+    for platform, python in lines:
+        files = per_line[platform, python]
         size = sum(os.path.getsize(os.path.join(args.dest, f)) for f in files)
-        print(f"- {platform}: {len(files)} wheels, {size / 2**20:.1f} MiB"
-              + (f"; missing: {', '.join(missing[platform])}" if missing[platform] else ""))
+        print(f"- {platform}, python {python}: {len(files)} wheels, {size / 2**20:.1f} MiB"
+              + (f"; missing: {', '.join(missing[platform, python])}" if missing[platform, python] else ""))
         for f in files:
             print(f"    {f}")
-        problems = check_closure(platform, [os.path.join(args.dest, f) for f in files], args.python_version)
+        problems = check_closure(platform, [os.path.join(args.dest, f) for f in files], python)
         for p in problems:
-            print(f"  ERROR: {platform}: {p}")
+            print(f"  ERROR: {platform}, python {python}: {p}")
         failed |= bool(problems)
     return 1 if failed else 0
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from . import ar_nodes, ar_read, ar_write, ids
 from .images import MapWriter
-from .pipeline import Outcome
+from .pipeline import Outcome, PipelineError
 
 STATE = ids.AR_STATE
 _LIGHTING = {}           # env hash -> EnvironmentLighting prepared in this session
@@ -124,8 +124,26 @@ def _group_fit(ng):
             ng.get(ar_nodes.FIT_KEY, ""))
 
 
+# AR's composite is a compositor node group (``scene.compositing_node_group``) whose Map UV
+# nodes take their interpolation and extension as inputs: Blender 5.0's compositor.  4.5's
+# (``scene.node_tree``, those settings as node properties) is not written.
+AR_MIN_BLENDER = (5, 0, 0)
+
+
+def unsupported_reason() -> str | None:
+    """Why this Blender cannot run AR mode, or None."""
+    if tuple(bpy.app.version) < AR_MIN_BLENDER:
+        return (f"AR mode needs Blender {'.'.join(map(str, AR_MIN_BLENDER[:2]))} or later "
+                f"(its compositor); this is Blender {bpy.app.version_string.split()[0]}")
+    return None
+
+
 def prepare(context, how="setup") -> ARJob:
-    """Read ``context.scene`` for AR mode (ar_read.read); PipelineError on bad input."""
+    """Read ``context.scene`` for AR mode (ar_read.read); PipelineError on bad input or a
+    Blender older than AR_MIN_BLENDER."""
+    reason = unsupported_reason()
+    if reason:
+        raise PipelineError(reason)
     inp = ar_read.read(context, require_objects=how == "setup")
     scene = context.scene
     st = state(scene) if is_set_up(scene) else {}

@@ -54,7 +54,10 @@ S2_MAX = 1.0 - 1e-6     # cap.py's sin^2 below 1 (float32: 1 - 1e-12 is 1)
 COMPOSITOR = "CompositorNodeTree"
 # the receivers' passes (view layer AOVs): coverage, position, normal
 AOV_COVERAGE, AOV_POSITION, AOV_NORMAL = "relight_ar_cov", "relight_ar_pos", "relight_ar_nor"
-AOVS = ((AOV_COVERAGE, "VALUE"), (AOV_POSITION, "COLOR"), (AOV_NORMAL, "COLOR"))
+# all three colour passes: EEVEE in Blender 5.2 writes zeros to a Value AOV listed before Color
+# AOVs (the coverage came out 0 and the composite lost every shadow; a Value AOV after them, or
+# a Color one, is written); the coverage is grey (c, c, c)
+AOVS = ((AOV_COVERAGE, "COLOR"), (AOV_POSITION, "COLOR"), (AOV_NORMAL, "COLOR"))
 
 VEC, FLT, COL = "NodeSocketVector", "NodeSocketFloat", "NodeSocketColor"
 

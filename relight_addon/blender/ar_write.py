@@ -74,7 +74,7 @@ def receiver_material(name, camera, photo, key):
         out = b.node("ShaderNodeOutputAOV")
         out.aov_name = aov
         if sock is None:
-            out.inputs["Value"].default_value = 1.0
+            out.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         else:
             b.link(geo.outputs[sock], out.inputs["Color"])
     o = b.node("ShaderNodeOutputMaterial")
@@ -152,12 +152,14 @@ def add_aovs(scene):
     """The receivers' AOVs on every view layer of ``scene`` (returns those added)."""
     added = []
     for layer in scene.view_layers:
-        have = {a.name for a in layer.aovs}
+        have = {a.name: a for a in layer.aovs}
         for name, kind in ar_nodes.AOVS:
             if name not in have:
                 a = layer.aovs.add()
                 a.name, a.type = name, kind
                 added.append(f"{layer.name}/{name}")
+            elif have[name].type != kind:      # a file set up when the coverage was a Value
+                have[name].type = kind
     return added
 
 

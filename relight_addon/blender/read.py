@@ -122,6 +122,23 @@ class ReadReport:
 
 # -- colour ------------------------------------------------------------------------------------
 
+
+def _light_nodes_matter(light) -> bool:
+    """Whether the light's node tree changes its light: anything beyond Blender 5.x's default
+    tree (every new light gets one, use_nodes on: a white, strength-1 Emission into the Light
+    Output), which lights exactly as no nodes do."""
+    tree = light.node_tree if getattr(light, "use_nodes", False) else None
+    if tree is None:
+        return False
+    kinds = sorted(n.bl_idname for n in tree.nodes)
+    if kinds != ["ShaderNodeEmission", "ShaderNodeOutputLight"]:
+        return True
+    emit = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeEmission")
+    colour, strength = emit.inputs["Color"], emit.inputs["Strength"]
+    return (colour.is_linked or strength.is_linked
+            or any(abs(c - 1.0) > 1e-6 for c in colour.default_value[:3])
+            or abs(strength.default_value - 1.0) > 1e-6)
+
 def image_texels(image, report=None):
     """Linear RGB texels (h, w, 3) float32 of a bpy image, or None when it has no pixels.
     NaN, infinite and negative texels (float images) are read as 0, with a warning."""
@@ -626,7 +643,7 @@ class _Reader:
             report.warn(f"Light '{label}' ({light.type.lower()}) is not supported and is "
                         "ignored")
             return
-        if getattr(light, "use_nodes", False) and light.node_tree is not None:
+        if _light_nodes_matter(light):
             report.warn(f"Light '{label}': light nodes are ignored")
         # A lamp that is off in the photo still gets its basis (light transport is linear),
         # computed at a reference power; the photo sees it at intensity 0.

@@ -71,7 +71,7 @@ def snapshot():
     out["props"] = {o.name: sorted(o.keys()) for o in bpy.data.objects}
     out["scene_props"] = sorted(sc.keys())
     out["settings"] = (sc.render.film_transparent, sc.view_settings.view_transform,
-                       getattr(sc.compositing_node_group, "name", None),
+                       getattr(getattr(sc, "compositing_node_group", None), "name", None),
                        [a.name for layer in sc.view_layers for a in layer.aovs])
     out["user"] = user_state(bpy)
     return out
