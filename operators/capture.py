@@ -286,7 +286,34 @@ def _frames(path):
     return [os.path.basename(path)], iter([calibration.read_image(path)]), 1, [path]
 
 
-class RELIGHT_OT_camera_from_marker(JobRunner, _BoardOperator, bpy.types.Operator):
+class _CaptureRunner(JobRunner):
+    """An operator whose work is a capture job (``job_class(op, context)``: every check and
+    what must be written before the work, ``compute(progress)`` bpy-free, ``finish(context,
+    result)`` writing and returning the report, ``abandon()`` undoing what ``__init__`` wrote)
+    run by JobRunner: synchronously from a script, in a worker thread with Esc in the UI."""
+
+    job_class = None
+
+    def _prepare(self, context, *args):
+        capture = _core()[0]
+        try:
+            return self.job_class(self, context)
+        except capture.CaptureError as ex:
+            self.report({'ERROR'}, str(ex))
+        except ImportError as ex:            # xatlas for an unwrap, OpenCV for the rest
+            self.report({'ERROR'}, f"{ex.name or 'A library'} is not available: check the "
+                                   "Relight dependencies")
+        return None
+
+    def _abandon(self, context, job):
+        job.abandon()
+
+    def _finish(self, context, job, result):
+        self.report({'INFO'}, job.finish(context, result))
+        return {'FINISHED'}
+
+
+class RELIGHT_OT_camera_from_marker(_CaptureRunner, _BoardOperator, bpy.types.Operator):
     """Pose the active camera so that the board object is seen as in the photo (the board's
     pose from its ChArUco corners and the calibration).  On a folder or a movie, one key per
     frame, outliers rejected and the path smoothed by quaternion slerp (interactively in a
@@ -328,17 +355,9 @@ class RELIGHT_OT_camera_from_marker(JobRunner, _BoardOperator, bpy.types.Operato
             return "The scene has no active camera"
         return None
 
-    def _prepare(self, context, *args):
-        capture = _core()[0]
-        try:
-            return MarkerJob(self, context)
-        except capture.CaptureError as ex:
-            self.report({'ERROR'}, str(ex))
-            return None
-
-    def _finish(self, context, job, result):
-        self.report({'INFO'}, job.finish(context, result))
-        return {'FINISHED'}
+    @property
+    def job_class(self):
+        return MarkerJob
 
 
 class MarkerJob:
@@ -411,6 +430,9 @@ class MarkerJob:
         if len(poses) > 1:
             mats, rejected = pose.smooth_path(mats, np.array(valid), self.smoothing)
         return dict(poses=poses, mats=mats, rejected=rejected, size=size)
+
+    def abandon(self):
+        """Nothing is written before :meth:`finish`."""
 
     def finish(self, context, out):
         """Write the camera (intrinsics, pose or keys, background photo); the report."""
@@ -597,7 +619,7 @@ def _seconds(t):
 # project_photos
 # ------------------------------------------------------------------------------------------
 
-class RELIGHT_OT_project_photos(JobRunner, bpy.types.Operator):
+class RELIGHT_OT_project_photos(_CaptureRunner, bpy.types.Operator):
     """Texture the selected meshes from the posed photos (the scene's cameras, each with its
     photo as background image; the selected cameras if any are selected): per texel the best
     views by facing, distance and resolution, ray-cast visibility, exposures matched, holes
@@ -636,24 +658,9 @@ class RELIGHT_OT_project_photos(JobRunner, bpy.types.Operator):
             return "Select the meshes to texture"
         return None
 
-    def _prepare(self, context, *args):
-        """Every check, then the xatlas UV maps (the projection reads the meshes through
-        them; ``_abandon`` removes them again) and the projection's inputs."""
-        capture = _core()[0]
-        try:
-            return ProjectionJob(self, context)
-        except capture.CaptureError as ex:
-            self.report({'ERROR'}, str(ex))
-        except ImportError:
-            self.report({'ERROR'}, "xatlas is not available: check the Relight dependencies")
-        return None
-
-    def _abandon(self, context, job):
-        job.remove_atlases()
-
-    def _finish(self, context, job, result):
-        self.report({'INFO'}, job.finish(result))
-        return {'FINISHED'}
+    @property
+    def job_class(self):
+        return ProjectionJob
 
 
 class ProjectionJob:
@@ -688,7 +695,7 @@ class ProjectionJob:
                 if not len(me.polygons):
                     raise capture.CaptureError(f"'{obj.name}' has no faces")
                 atlases[obj.name] = atlas_loop_uvs(me, obj.matrix_world)[0]
-        # -- from here on the scene is written (undone by remove_atlases) --
+        # -- from here on the scene is written (undone by abandon) --
         self.added = []
         for obj in meshes:
             if obj.name in atlases:
@@ -706,13 +713,13 @@ class ProjectionJob:
                 self.targets.append(projection.Target(obj.name, tris, uvs, (n, n)))
             self.occluders = bridge.scene_triangles(depsgraph)
         except Exception:
-            self.remove_atlases()
+            self.abandon()
             raise
 
     def _uv(self, obj):
         return _bridge().uv_layer_name(obj, self.uv_map) or self.uv_name
 
-    def remove_atlases(self):
+    def abandon(self):
         """Remove the UV maps this job added (a cancelled or failed projection)."""
         for me, name in self.added:
             layer = me.uv_layers.get(name)
@@ -727,7 +734,7 @@ class ProjectionJob:
         return projection.project(self.targets, self.views, *self.occluders, progress=report,
                                   **self.options)
 
-    def finish(self, result):
+    def finish(self, context, result):
         """Write the textures and materials; the one-sentence report."""
         bridge = _bridge()
         for obj, res in zip(self.meshes, result.meshes):

@@ -194,5 +194,5 @@ def test_a_failed_or_cancelled_projection_changes_nothing(photos, monkeypatch):
     assert solve.state == "cancelled" and solve.result is None
     assert seen and max(seen) < 1.0
     assert solve.label == "projection"          # what the busy buttons name
-    job.remove_atlases()
+    job.abandon()                               # what the operator does on Esc
     assert _state(scene) == state
