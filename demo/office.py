@@ -182,6 +182,8 @@ def main(argv=None):
     parser.add_argument("--cycles-samples", type=int, default=64)
     parser.add_argument("--no-denoise", dest="denoise", action="store_false",
                         help="Cycles truth without the OpenImageDenoise pass (noisier)")
+    parser.add_argument("--json", default="",
+                        help="also write the timings and differences there (JSON)")
     parser.add_argument("--results", default="",
                         help="also copy the side-by-side picture there (e.g. "
                              "benchmarks/results/demo_office.png)")
@@ -288,6 +290,8 @@ def main(argv=None):
     times["update: virtual lamp and box"] = time.perf_counter() - t0
     if "FINISHED" not in result:
         raise SystemExit(f"relight.update returned {result}")
+    # Update wrote new relit materials (the former ones are removed): the slots hold them now
+    relit = {o: bpy.data.objects[o].material_slots[0].material for o in info.objects}
     for f, p in ((1, 0.0), (3, 0.0), (4, VIRTUAL_W)):     # on at frame 4 only
         light.energy = p
         light.keyframe_insert("energy", frame=f)
@@ -337,7 +341,8 @@ def main(argv=None):
                  ["|relit - truth| x 4, frame 1 (original lighting)",
                   "|relit - truth| x 4, frame 3 (A off, B doubled)",
                   "|relit - truth| x 4, frame 4 (virtual lamp and box)"],
-                 "sRGB-encoded difference; frame 1 = floor (48^2-texel photo vs per-pixel render, noise).", diff_png)
+                 f"sRGB-encoded difference; frame 1 = floor ({args.texture_size}^2-texel photo vs per-pixel "
+                 "render, noise).", diff_png)
     if args.results:
         import shutil
         os.makedirs(os.path.dirname(os.path.abspath(args.results)), exist_ok=True)
@@ -362,11 +367,16 @@ def main(argv=None):
     for f in (1, 3, 4):
         print(f"  frame {f}: relit (EEVEE) vs Cycles truth: mean |diff| {diffs[f]['srgb255']:.1f}"
               f"/255 (sRGB), {100 * diffs[f]['linear_rel']:.1f} % of the mean (linear)")
-    print("  Frame 1 is the floor: the photo is a 48^2-texel Cycles bake (Closest filtering, texel "
+    print(f"  Frame 1 is the floor: the photo is a {args.texture_size}^2-texel Cycles bake (Closest filtering, texel "
           "blocks and\n  edges) against a per-pixel Cycles render.  Frame 3 adds the error of the "
           "shadow removal\n  (benchmarks/results/shadowfree.md measures it on the textures).")
     print(f"  -> {side}, {blend}, {', '.join(os.path.basename(p) for p in frames.values())}")
-    return dict(times=times, diffs=diffs, side=side, blend=blend)
+    summary = dict(times=times, diffs=diffs, side=side, blend=blend)
+    if args.json:
+        import json
+        with open(args.json, "w") as f:
+            json.dump(summary, f, indent=1)
+    return summary
 
 
 if __name__ == "__main__":
