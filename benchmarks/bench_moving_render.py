@@ -162,6 +162,7 @@ def build(args, tmp):
     scene.relight.preset = "medium"
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     scene.relight.settle = False
+    scene.relight.cycles_shadows = "SPHERES"     # Cycles as EEVEE (bench_ray_shadow: the rays)
     setup_render(bpy)
     scene.render.resolution_x, scene.render.resolution_y = RES
     paths, info_out = {}, {}
@@ -187,6 +188,14 @@ def build(args, tmp):
             sn.sync(scene, settle_shadows=False, cull=False)
             save(f"nocull{n}")
             sn.sync(scene, settle_shadows=False)
+        if n in getattr(args, "rays", ()):
+            scene.relight.cycles_shadows = "RAYS"
+            t0 = time.perf_counter()
+            assert bpy.ops.relight.update() == {"FINISHED"}
+            info_out.setdefault("rays", {})[n] = time.perf_counter() - t0
+            save(f"rays{n}")
+            scene.relight.cycles_shadows = "SPHERES"
+            assert bpy.ops.relight.update() == {"FINISHED"}
     return paths, info_out
 
 

@@ -84,6 +84,14 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                          description="On Update, ray-trace the moving objects' real shadows "
                                      "where they stand; the materials use them until an "
                                      "object moves (then its spheres' shadow)")
+    cycles_shadows: EnumProperty(
+        name="Cycles Moving Shadows", default="RAYS",
+        items=(("RAYS", "Rays", "Cycles casts rays towards the lamps against the moving objects' "
+                                "real meshes (Blender 5.1 and later): their exact shadows, soft "
+                                "as samples add up; EEVEE shows the spheres' shadows"),
+               ("SPHERES", "Spheres", "Cycles shows the spheres' shadows, as EEVEE does")),
+        description="How Cycles renders the moving virtual objects' shadows on the relit "
+                    "surfaces (takes effect on Update)")
     overlay: EnumProperty(name="Overlay", items=OVERLAY_ITEMS, default="NONE",
                           update=update_overlay,
                           description="Draw the last precompute's radiosity elements or links "

@@ -60,6 +60,7 @@ def _inserted_monkey(spheres):
     build_scene()
     scene = bpy.context.scene
     scene.relight.preset = "draft"
+    scene.relight.cycles_shadows = "SPHERES"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     monkey = _monkey(spheres=spheres)
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -72,21 +73,22 @@ def room():
     build_scene()
     bpy.context.scene.relight.preset = "draft"
     bpy.context.scene.relight.settle = False     # the spheres' shadows everywhere (see below)
+    bpy.context.scene.relight.cycles_shadows = "SPHERES"   # Cycles shows them too (their twin)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     monkey = _monkey()
     assert bpy.ops.relight.update() == {"FINISHED"}
     return monkey
 
 
-def _bake(obj, mat):
-    """Cycles EMIT bake of ``obj`` with ``mat`` in its first slot: (BAKE, BAKE, 4)."""
+def _bake(obj, mat, size=BAKE, samples=1):
+    """Cycles EMIT bake of ``obj`` with ``mat`` in its first slot: (size, size, 4)."""
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 1
+    scene.cycles.samples = samples
     old = obj.material_slots[0].material
     obj.material_slots[0].material = mat
-    img = bpy.data.images.new("sphere_test_bake", BAKE, BAKE, float_buffer=True)
+    img = bpy.data.images.new("sphere_test_bake", size, size, float_buffer=True)
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
     tex.image = img
     mat.node_tree.nodes.active = tex
@@ -96,13 +98,13 @@ def _bake(obj, mat):
     bpy.context.view_layer.objects.active = obj
     try:
         assert bpy.ops.object.bake(type="EMIT") == {"FINISHED"}
-        px = np.empty(BAKE * BAKE * 4, np.float32)
+        px = np.empty(size * size * 4, np.float32)
         img.pixels.foreach_get(px)
     finally:
         mat.node_tree.nodes.remove(tex)
         bpy.data.images.remove(img)
         obj.material_slots[0].material = old
-    return px.reshape(BAKE, BAKE, 4)
+    return px.reshape(size, size, 4)
 
 
 def _unshadowed_bake(obj, mat):
@@ -737,3 +739,81 @@ def test_a_drag_settles_when_it_stops():
                    and n.image is not None and sn.SETTLED_KEY in n.image]
     assert settled_tex and {n.extension for n in settled_tex} == {"EXTEND"}
     assert {n.image.name for n in settled_tex} == {"Floor_mat_img.relight.settled.0"}
+
+
+@pytest.mark.skipif(not hasattr(bpy.types, "ShaderNodeRaycast"), reason="Blender 5.1+")
+def test_cycles_rays_give_the_real_mesh_s_moving_shadow():
+    """Cycles Moving Shadows "Rays" (the default where Blender has the Raycast node): Cycles
+    shows the moving object's real mesh's shadow, EEVEE the spheres'.  Suzanne moved after
+    Update (no settled shadow), lamp A alone: the floor's EMIT bake with the shadow over the
+    same bake with Suzanne out of reach is 1 - a (1 - V); against V from Cycles' direct light
+    on the floor with and without Suzanne (an independent truth), the rays' factor is closer
+    than the spheres' twin; the material keeps its own output for EEVEE (the spheres), and
+    Spheres takes the rays out again."""
+    addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    scene.relight.settle = False
+    assert scene.relight.cycles_shadows == "RAYS"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey(spheres=8)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    sn = _nodes()
+    floor = bpy.data.objects["Floor"]
+    mat = floor.material_slots[0].material
+    outs = {n.target: n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"}
+    assert set(outs) == {"EEVEE", "CYCLES"} and outs["EEVEE"].inputs["Surface"].is_linked
+    assert mat.node_tree.nodes["S LampA"].inputs["Scale"].is_linked     # EEVEE: the spheres
+    ray = next(g for g in bpy.data.node_groups if g.get("relight_ray_object") == "Monkey")
+    assert all(fc.driver.is_simple_expression for fc in ray.animation_data.drivers)
+    monkey.location = (-0.6, -0.3, 0.8)                # moved: no Update
+    bpy.context.view_layer.update()
+    energy_b = bpy.data.lights["LampB"].energy
+    bpy.data.lights["LampB"].energy = 0.0
+    bpy.context.view_layer.update()
+    try:
+        with_obj = _direct_bake(floor)
+        monkey.hide_render = True
+        without = _direct_bake(floor)
+        monkey.hide_render = False
+        shadowed = _bake(floor, mat, 16, 128)[..., 0]
+        where = tuple(monkey.location)
+        monkey.location = (0.0, 0.0, 40.0)             # out of every lamp's reach
+        bpy.context.view_layer.update()
+        plain = _bake(floor, mat, 16, 128)[..., 0]
+        monkey.location = where
+        bpy.context.view_layer.update()
+        a = _bake(floor, _alpha_material(mat.node_tree.nodes["M LampA"].image), 16)[..., 0]
+        P = _bake(floor, _position_material(), 16)[..., :3].reshape(-1, 3)
+    finally:
+        bpy.data.lights["LampB"].energy = energy_b
+        bpy.context.view_layer.update()
+    lit = without > 0.05 * without.max()
+    v_true = np.where(lit, with_obj / np.maximum(without, 1e-9), 1.0)
+    want = 1 - a * (1 - v_true)
+    got = np.where(plain > 1e-6, shadowed / np.maximum(plain, 1e-6), 1.0)
+    group = next(g for g in bpy.data.node_groups if g.get(sn.OBJECT_KEY) == "Monkey")
+    centres, radii, hull = sn.group_spheres(group)
+    M = np.array(monkey.matrix_world)
+    lamp = bpy.data.objects["LampA"]
+    v_sph = sphere_visibility(to_local(P, M), to_local(np.array(lamp.location)[None], M)[0],
+                              _lamp_radius(lamp) / float(np.mean(monkey.scale)),
+                              centres, radii, hull).reshape(16, 16)
+    spheres = 1 - a * (1 - v_sph)
+    shadow = lit & ((want < 0.95) | (got < 0.95) | (spheres < 0.95))
+    err_rays = np.abs(got - want)[shadow].mean()
+    err_sph = np.abs(spheres - want)[shadow].mean()
+    far = lit & (want > 0.999) & (spheres > 0.999)     # no shadow there by either
+    print(f"{int(shadow.sum())} shadow texels: |factor - Cycles| rays {err_rays:.3f}, "
+          f"spheres {err_sph:.3f}; far from it rays {got[far].min():.4f}-{got[far].max():.4f}")
+    assert np.isfinite(got).all() and shadow.sum() >= 5 and (want < 0.6).sum() >= 2
+    assert err_rays < 0.05 and err_rays < 0.7 * err_sph
+    # no shadow where there is none (the two bakes' own noise: a texel or two at +-2 %)
+    assert far.sum() >= 100 and got[far].min() > 0.97 and abs(np.median(got[far]) - 1) < 1e-3
+    scene.relight.cycles_shadows = "SPHERES"
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    mat = floor.material_slots[0].material
+    outs = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    assert [n.target for n in outs] == ["ALL"]
+    assert not [g for g in bpy.data.node_groups if g.get("relight_ray_object")]

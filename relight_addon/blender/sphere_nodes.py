@@ -22,6 +22,10 @@ map image's alpha).  Nothing runs in Python at render time:
   over where it is 0; a lamp whose map has no direct part anywhere gets no spheres.  EEVEE
   evaluates both branches: there only the lamps dropped save time.
 
+* Cycles, where Blender has the Raycast node (5.1+) and the scene's Cycles Moving Shadows is
+  "Rays": the materials get a second output, for Cycles, whose factors take V from rays cast at
+  the objects' real meshes (ray_shadow.py); the spheres then serve EEVEE alone.
+
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
 needs Update (the spheres are fitted again).
@@ -45,7 +49,7 @@ import numpy as np
 from ..core.relight.settled import object_visibility, visibility_images
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE, bounding_sphere
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
-from . import ids
+from . import ids, ray_shadow
 from .drivers import add_driver
 from .ids import MAP_SOURCE, scene_key
 from .images import CONTENT, MapWriter
@@ -64,7 +68,9 @@ WIRING_KEY = "relight_sphere_wiring"   # on a relit material: the groups it is w
 NODE_PREFIX = "Relight Shadow"         # material nodes made here (removed before each sync)
 SURFACE_KEY = "relight_sphere_surface" # on a relit material: the closure its output had before
 DIRECT_KEY = "relight_direct_max"      # on a map image: its largest alpha, for its content hash
-WIRING_VERSION = 3                     # of the material wiring (older wirings are made again)
+RAYS_KEY = "relight_sphere_rays"     # on a relit material: its own output was set to EEVEE
+CYCLES_OUTPUT = f"{NODE_PREFIX} Cycles output"
+WIRING_VERSION = 4                     # of the material wiring (older wirings are made again)
 # A map whose direct part (alpha) stays below this everywhere gets no sphere shadow: dropping
 # it changes the lamp's term by at most this fraction (the half-float maps' own spacing is 1e-3).
 DIRECT_FLOOR = 1e-3
@@ -586,7 +592,7 @@ def shadowed_terms(mat, lamp_group_of, cull=True):
 
 def _surface_socket(tree):
     out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
-                and n.is_active_output), None)
+                and n.is_active_output and not n.name.startswith(NODE_PREFIX)), None)
     return None if out is None else out.inputs["Surface"]
 
 
@@ -598,6 +604,11 @@ def _unwire(mat):
     own = tree.nodes.get(mat.get(SURFACE_KEY, ""))
     for node in [n for n in tree.nodes if n.name.startswith(NODE_PREFIX)]:
         tree.nodes.remove(node)
+    if mat.get(RAYS_KEY):                # its own output serves every engine again
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial" and node.target == "EEVEE":
+                node.target = "ALL"
+        del mat[RAYS_KEY]
     for _, _, s_node in _lamp_terms(mat):
         for link in list(s_node.inputs["Scale"].links):
             tree.links.remove(link)
@@ -606,7 +617,7 @@ def _unwire(mat):
         tree.links.new(own.outputs[0], surface)
 
 
-def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
+def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, rays=()):
     """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
     (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
     (settled group, settled images) or None.  ``cull`` False: every lamp term evaluates the
@@ -621,11 +632,18 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
     the nodes only that branch uses, so a shading point out of every object's reach pays the
     reach tests and not the spheres (EEVEE evaluates both branches).  Settled: the plain branch
     holds the settled shadow and the reach is 0 while the objects stand where it was traced (a
-    constant factor: Cycles keeps only that branch)."""
+    constant factor: Cycles keeps only that branch).
+
+    ``rays`` (ray_shadow's groups, Blender 5.1+): the material's own output then serves EEVEE
+    only, and a second output serves Cycles: one Emission of T x (sum of the lamp terms, each
+    shadowed term's factor taking V from the rays towards a point of the lamp, or the settled
+    V while the objects stand where it was traced)."""
     tree = mat.node_tree
     flag_group, settled_images = settled if settled is not None else (None, [])
     terms = shadowed_terms(mat, lamp_group_of, cull) if sphere_groups else []
+    rays = list(rays) if sphere_groups else []
     signature = repr((WIRING_VERSION, cull, sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
+                      sorted((g.name, g.get(FIT_KEY, "")) for g in rays),
                       sorted(t[0] for t in terms),
                       None if flag_group is None else
                       (flag_group.get("relight_settled_run"),
@@ -686,6 +704,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
         still = math("SUBTRACT", 1.0, flag, "Moving", (x0 + 200, 400))
     closures = []
     wired = {t[0] for t in terms}
+    ray_terms = []                       # (lamp node, term, alpha, reach, plain term)
     for lname, m_node, s_node in terms:
         y = s_node.location.y - 60
         lamp = node("ShaderNodeGroup", f"Lamp {lname}", (x0, y))
@@ -716,6 +735,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
                        s_node.inputs["Scale"])
         term = s_node.inputs[0].links[0].from_socket
         plain = term
+        exact = None
         if flag is not None:             # fac: in reach and moving; plain: the settled shadow
             reach = math("MULTIPLY", reach, still, "Reach moving", (x0 + 560, y + 60))
             found = _settled_channel(settled_images, m_node, lname)
@@ -746,6 +766,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
         shadowed = emission(s_node.outputs[0], f"Shadowed {lname}", (x1, y - 60))
         if not cull:                     # reach taken as 1: the spheres everywhere
             reach = still
+        ray_terms.append((lamp, term, alpha, reach, plain))
         if reach is None:
             closures.append(shadowed)
             continue
@@ -771,20 +792,101 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True):
         tree.links.new(c, add.inputs[1])
         out = add.outputs[0]
     tree.links.new(out, surface)
+    if rays:
+        _wire_rays(mat, node, math, emission, geo, ray_terms, rest, rays, surface.node,
+                   (x0, x1))
     return 1
 
 
-def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=True) -> dict:
+def _wire_rays(mat, node, math, emission, geo, ray_terms, rest, rays, own_out, xs):
+    """The Cycles output of a material wired by _wire_material (see there): each shadowed lamp
+    term on the same reach branch as the spheres' (the reach tests are computed once, both
+    outputs use them: Cycles compiles only the nodes its output needs), with V from the rays."""
+    tree = mat.node_tree
+    x0, x1 = xs
+    own_out.target = "EEVEE"
+    mat[RAYS_KEY] = 1
+    target = ray_shadow.target_group(mat.get(ids.SCENE_KEY))
+    closures = []
+    for idx, (lamp, term, alpha, reach, plain) in enumerate(ray_terms):
+        y = lamp.location.y - 400
+        tgt = node("ShaderNodeGroup", "Ray target", (x0 + 200, y))
+        tgt.node_tree = target
+        tree.links.new(geo.outputs["Position"], tgt.inputs["Position"])
+        tree.links.new(lamp.outputs["Position"], tgt.inputs["Lamp"])
+        tree.links.new(lamp.outputs["Radius"], tgt.inputs["Lamp Radius"])
+        tgt.inputs["Seed"].default_value = float(idx + 1)
+        vis = None
+        for j, rg in enumerate(rays):
+            g = node("ShaderNodeGroup", f"Ray {rg[ray_shadow.RAY_OBJECT_KEY]}",
+                     (x0 + 400, y - 120 * j))
+            g.node_tree = rg
+            tree.links.new(geo.outputs["Position"], g.inputs["Position"])
+            tree.links.new(tgt.outputs["Target"], g.inputs["Target"])
+            vis = g.outputs["Visibility"] if vis is None else \
+                math("MULTIPLY", vis, g.outputs["Visibility"], "Ray product",
+                     (x0 + 600, y - 120 * j))
+        lost = math("MULTIPLY", alpha, math("SUBTRACT", 1.0, vis, "Ray lost", (x0 + 700, y)),
+                    "Ray direct part", (x0 + 840, y))
+        scaled = node("ShaderNodeVectorMath", "Ray term", (x0 + 1120, y), operation="SCALE")
+        tree.links.new(term, scaled.inputs[0])
+        tree.links.new(math("SUBTRACT", 1.0, lost, "Ray factor", (x0 + 980, y)),
+                       scaled.inputs["Scale"])
+        shadowed = emission(scaled.outputs[0], "Ray shadowed", (x1, y - 400))
+        if reach is None:
+            closures.append(shadowed)
+            continue
+        mix = node("ShaderNodeMixShader", "Ray branch", (x1 + 400, y - 400))
+        tree.links.new(reach, mix.inputs["Fac"])
+        tree.links.new(emission(plain, "Ray plain", (x1, y - 340)), mix.inputs[1])
+        tree.links.new(shadowed, mix.inputs[2])
+        closures.append(mix.outputs[0])
+    if rest:
+        total = rest[0].outputs[0]
+        for s_node in rest[1:]:
+            total = _vadd(node, tree, total, s_node.outputs[0], s_node.location.y)
+        closures.insert(0, emission(total, "Ray unshadowed", (x1, -900)))
+    out = closures[0]
+    for k, c in enumerate(closures[1:]):
+        add = node("ShaderNodeAddShader", "Ray lamps", (x1 + 600, -900 - 120 * k))
+        tree.links.new(out, add.inputs[0])
+        tree.links.new(c, add.inputs[1])
+        out = add.outputs[0]
+    c_out = node("ShaderNodeOutputMaterial", "Cycles output", (x1 + 900, -900), target="CYCLES")
+    c_out.name = CYCLES_OUTPUT
+    tree.links.new(out, c_out.inputs["Surface"])
+
+
+def _vadd(node, tree, a, b, y):
+    add = node("ShaderNodeVectorMath", "Ray sum", (0, y), operation="ADD")
+    tree.links.new(a, add.inputs[0])
+    tree.links.new(b, add.inputs[1])
+    return add.outputs[0]
+
+
+def _use_rays(scene, rays):
+    """Whether Cycles takes the moving shadows from rays (ray_shadow.py): the scene's setting
+    ("Cycles Moving Shadows") unless ``rays`` says, where this Blender has the Raycast node."""
+    if rays is None:
+        rays = getattr(getattr(scene, "relight", None), "cycles_shadows", "RAYS") == "RAYS"
+    return bool(rays) and ray_shadow.available()
+
+
+def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=True,
+         rays=None) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
     no longer moving, settle their shadows where they stand (with ``result``, the scene's last
     ShadowFreeResult; without it the settled shadows are kept while the objects' meshes are the
-    same), and wire every relit material (``cull``: see _wire_material).  Returns a summary."""
+    same), and wire every relit material (``cull``: see _wire_material; ``rays``: Cycles' shadows
+    from rays, see _use_rays).  Returns a summary."""
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     groups = sphere_groups(key)
+    use_rays = _use_rays(scene, rays)
+    old_rays, rays_wanted = ray_shadow.ray_groups(key), []
     wanted, fitted = [], 0
     for obj in moving_objects(scene):
         n = sphere_count(obj)
@@ -792,6 +894,15 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
         if len(tris) == 0:
             continue
         h = _fit_hash(tris, n)
+        if use_rays:
+            rg = old_rays.pop(obj.name, None)
+            if rg is None or rg.get(FIT_KEY) != h:
+                if rg is not None:
+                    bpy.data.node_groups.remove(rg)
+                rg = ray_shadow.make_ray_group(obj, tris, key, _world_point_expressions,
+                                               _frame_vars)
+                rg[FIT_KEY] = h
+            rays_wanted.append(rg)
         old = groups.pop(obj.name, None)
         if old is not None and old.get(FIT_KEY) == h:
             wanted.append(old)
@@ -801,7 +912,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
         centres, radii = fit_spheres(tris, n, seed)
         wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris)))
         fitted += 1
-    for stale in groups.values():
+    for stale in [*groups.values(), *old_rays.values()]:
         bpy.data.node_groups.remove(stale)
     objs = [bpy.data.objects[g[OBJECT_KEY]] for g in wanted]
     fits = {g[OBJECT_KEY]: g[FIT_KEY] for g in wanted}
@@ -823,7 +934,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
     settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if ids.ours(m, key) and m.node_tree is not None]
-    wired = sum(_wire_material(m, lamps, wanted, settled, cull) for m in mats)
+    wired = sum(_wire_material(m, lamps, wanted, settled, cull, rays_wanted) for m in mats)
     tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
     warnings = []
     if tests > EEVEE_SPHERE_TESTS:
@@ -831,9 +942,11 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
             f"Moving objects: {tests} sphere tests in every relit material ({len(lamps)} lamps x "
             f"{tests // max(len(lamps), 1)} spheres); EEVEE may take minutes to compile that "
             f"many or fail (measured on 2 cores: {EEVEE_SPHERE_TESTS} took about 2 minutes, 512 "
-            "failed) and every Cycles frame takes longer to prepare and to shade with the count "
-            "(2 lamps x 128 spheres: some 7 s before the first sample): lower the objects' "
-            "Spheres")
+            + ("failed): lower the objects' Spheres (Cycles casts rays instead)" if rays_wanted
+               else "failed) and every Cycles frame takes longer to prepare and to shade with "
+                    "the count (2 lamps x 128 spheres: some 7 s before the first sample): lower "
+                    "the objects' Spheres"))
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
             "settled": flag_group is not None, "settle_seconds": settled_s,
+            "rays": bool(rays_wanted),
             "warnings": warnings}
