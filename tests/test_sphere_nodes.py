@@ -741,15 +741,53 @@ def test_a_drag_settles_when_it_stops():
     assert {n.image.name for n in settled_tex} == {"Floor_mat_img.relight.settled.0"}
 
 
+RAY_FARM = r"""
+import json, sys
+import bpy
+import numpy as np
+bpy.context.preferences.filepaths.use_scripts_auto_execute = False
+bpy.ops.wm.open_mainfile(filepath=sys.argv[-2], load_ui=False)
+assert "relight_ext" not in sys.modules
+scene = bpy.context.scene
+scene.cycles.samples = 16
+scene.frame_set(20)
+
+
+def render(tag):
+    scene.render.filepath = f"{sys.argv[-1]}_{tag}.exr"
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(img.size[1], img.size[0], 4)[..., :3].sum(-1)
+
+
+shadowed = render("with")
+monkey = bpy.data.objects["Monkey"]
+monkey.animation_data_clear()
+monkey.location = (0.0, 0.0, 40.0)
+away = render("away")
+monkey.location = (0.0, 0.0, 41.0)
+plain = render("plain")
+on = plain > 1e-4
+ratio = np.where(on, shadowed / np.maximum(plain, 1e-4), 1.0)
+print("FARM" + json.dumps({"finite": bool(np.isfinite(shadowed).all()),
+                           "shadowed": int((ratio < 0.8).sum()), "darkest": float(ratio.min()),
+                           "away_darkest": float(np.where(on, away / np.maximum(plain, 1e-4),
+                                                          1.0).min())}))
+"""
+
+
 @pytest.mark.skipif(not hasattr(bpy.types, "ShaderNodeRaycast"), reason="Blender 5.1+")
-def test_cycles_rays_give_the_real_mesh_s_moving_shadow():
+def test_cycles_rays_give_the_real_mesh_s_moving_shadow(tmp_path):
     """Cycles Moving Shadows "Rays" (the default where Blender has the Raycast node): Cycles
     shows the moving object's real mesh's shadow, EEVEE the spheres'.  Suzanne moved after
     Update (no settled shadow), lamp A alone: the floor's EMIT bake with the shadow over the
     same bake with Suzanne out of reach is 1 - a (1 - V); against V from Cycles' direct light
     on the floor with and without Suzanne (an independent truth), the rays' factor is closer
-    than the spheres' twin; the material keeps its own output for EEVEE (the spheres), and
-    Spheres takes the rays out again."""
+    than the spheres' twin; the material keeps its own output for EEVEE (the spheres); a
+    fresh process without the extension, Python auto-run off, renders the shadow from the
+    .blend (and none with the object away); and Spheres takes the rays out again."""
     addon()
     build_scene()
     scene = bpy.context.scene
@@ -811,6 +849,20 @@ def test_cycles_rays_give_the_real_mesh_s_moving_shadow():
     assert err_rays < 0.05 and err_rays < 0.7 * err_sph
     # no shadow where there is none (the two bakes' own noise: a texel or two at +-2 %)
     assert far.sum() >= 100 and got[far].min() > 0.97 and abs(np.median(got[far]) - 1) < 1e-3
+    # a farm renders it from the .blend alone (no extension, Python auto-run off), the object
+    # keyframed: its shadow at frame 20 is where it stands then, gone with it out of reach
+    _camera_over_floor(32)
+    monkey.keyframe_insert("location", frame=20)
+    path = os.path.join(str(tmp_path), "rays.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    proc = subprocess.run([sys.executable, "-c", RAY_FARM, path, str(tmp_path / "ray")],
+                          capture_output=True, text=True, timeout=600)
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("FARM")]
+    assert line, proc.stdout[-2000:] + proc.stderr[-2000:]
+    farm = json.loads(line[0][4:])
+    print("farm:", farm)
+    assert farm["finite"] and farm["shadowed"] >= 5 and farm["darkest"] < 0.6
+    assert farm["away_darkest"] > 0.97
     scene.relight.cycles_shadows = "SPHERES"
     assert bpy.ops.relight.update() == {"FINISHED"}
     mat = floor.material_slots[0].material
