@@ -56,3 +56,24 @@ def drivers_reading(tree, idb, data_path):
             t = var.targets[0]
             if t.id == idb and t.data_path == data_path:
                 yield fc, var.name
+
+
+def frame_vars(obj):
+    """Location (l, m, n), rotation (w, x, y, z) and scale (a, b, c) of ``obj``, world space."""
+    return [(n, "TRANSFORMS", obj, w) for n, w in zip(
+        "lmnwxyzabc", ("LOC_X", "LOC_Y", "LOC_Z", "ROT_W", "ROT_X", "ROT_Y", "ROT_Z",
+                       "SCALE_X", "SCALE_Y", "SCALE_Z"))]
+
+
+def world_point_expressions(point):
+    """Simple expressions (over frame_vars) of the world position of ``point``, given in the
+    object's frame: location + rotation (scale x point), the rotation matrix of the unit
+    quaternion (w, x, y, z)."""
+    px, py, pz = (repr(float(v)) for v in point)
+    sx, sy, sz = f"a * {px}", f"b * {py}", f"c * {pz}"
+    return (f"l + (1 - 2 * (y * y + z * z)) * {sx} + 2 * (x * y - w * z) * {sy}"
+            f" + 2 * (x * z + w * y) * {sz}",
+            f"m + 2 * (x * y + w * z) * {sx} + (1 - 2 * (x * x + z * z)) * {sy}"
+            f" + 2 * (y * z - w * x) * {sz}",
+            f"n + 2 * (x * z - w * y) * {sx} + 2 * (y * z + w * x) * {sy}"
+            f" + (1 - 2 * (x * x + y * y)) * {sz}")

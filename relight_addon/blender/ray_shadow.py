@@ -25,7 +25,7 @@ import bpy
 import numpy as np
 
 from . import ids
-from .drivers import add_driver
+from .drivers import add_driver, frame_vars, world_point_expressions
 from .nodes import Builder, new_group
 
 RAY_OBJECT_KEY = "relight_ray_object"   # on a ray group: the object's name
@@ -59,7 +59,7 @@ def ray_groups(key):
             if RAY_OBJECT_KEY in ng and ng.get(ids.SCENE_KEY) == key}
 
 
-def make_ray_group(obj, tris, key, world_point_expressions, frame_vars):
+def make_ray_group(obj, tris, key):
     """The group of ``obj``: inputs Position and Target (world), output Visibility, 0 where the
     segment from Position to Target meets the object inside its bounding sphere, else 1."""
     centre, radius = mesh_bound(tris)

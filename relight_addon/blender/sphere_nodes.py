@@ -50,7 +50,7 @@ from ..core.relight.settled import object_visibility, visibility_images
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE, bounding_sphere
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
 from . import ids, ray_shadow
-from .drivers import add_driver
+from .drivers import add_driver, frame_vars, world_point_expressions
 from .ids import MAP_SOURCE, scene_key
 from .images import CONTENT, MapWriter
 from .nodes import Builder, new_group
@@ -91,27 +91,6 @@ EEVEE_SPHERE_TESTS = 128
 
 def _transform_vars(obj, what):
     return [(w.lower().replace("_", ""), "TRANSFORMS", obj, w) for w in what]
-
-
-def _frame_vars(obj):
-    """Location (l, m, n), rotation (w, x, y, z) and scale (a, b, c) of ``obj``, world space."""
-    return [(n, "TRANSFORMS", obj, w) for n, w in zip(
-        "lmnwxyzabc", ("LOC_X", "LOC_Y", "LOC_Z", "ROT_W", "ROT_X", "ROT_Y", "ROT_Z",
-                       "SCALE_X", "SCALE_Y", "SCALE_Z"))]
-
-
-def _world_point_expressions(point):
-    """Simple expressions (over _frame_vars) of the world position of ``point``, given in the
-    object's frame: location + rotation (scale x point), the rotation matrix of the unit
-    quaternion (w, x, y, z)."""
-    px, py, pz = (repr(float(v)) for v in point)
-    sx, sy, sz = f"a * {px}", f"b * {py}", f"c * {pz}"
-    return (f"l + (1 - 2 * (y * y + z * z)) * {sx} + 2 * (x * y - w * z) * {sy}"
-            f" + 2 * (x * z + w * y) * {sz}",
-            f"m + 2 * (x * y + w * z) * {sx} + (1 - 2 * (x * x + z * z)) * {sy}"
-            f" + 2 * (y * z - w * x) * {sz}",
-            f"n + 2 * (x * z - w * y) * {sx} + 2 * (y * z + w * x) * {sy}"
-            f" + (1 - 2 * (x * x + y * y)) * {sz}")
 
 
 # -- lamps -------------------------------------------------------------------------------------
@@ -349,8 +328,8 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     neg_sin = b.math("MULTIPLY", sin_l, -1.0)
     cos_l = b.math("SQRT", b.math("MULTIPLY_ADD", sin_l, neg_sin, 1.0))
     centre_w = tree.new("ShaderNodeCombineXYZ")
-    for i, expr in enumerate(_world_point_expressions(bound[0])):
-        add_driver(centre_w.inputs[i], expr, _frame_vars(obj))
+    for i, expr in enumerate(world_point_expressions(bound[0])):
+        add_driver(centre_w.inputs[i], expr, frame_vars(obj))
     radius_w = tree.new("ShaderNodeValue")
     add_driver(radius_w.outputs[0], f"{float(bound[1])!r} * max(a, b, c)",
                [(n, "TRANSFORMS", obj, w) for n, w in zip("abc", ("SCALE_X", "SCALE_Y",
@@ -899,8 +878,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
             if rg is None or rg.get(FIT_KEY) != h:
                 if rg is not None:
                     bpy.data.node_groups.remove(rg)
-                rg = ray_shadow.make_ray_group(obj, tris, key, _world_point_expressions,
-                                               _frame_vars)
+                rg = ray_shadow.make_ray_group(obj, tris, key)
                 rg[FIT_KEY] = h
             rays_wanted.append(rg)
         old = groups.pop(obj.name, None)
