@@ -163,6 +163,7 @@ def build(args, tmp):
     assert bpy.ops.relight.precompute(preset="medium") == {"FINISHED"}
     scene.relight.settle = False
     scene.relight.cycles_shadows = "SPHERES"     # Cycles as EEVEE (bench_ray_shadow: the rays)
+    scene.relight.eevee_shadows = "SPHERES"      # (bench_eevee_shadow: EEVEE's shadow maps)
     setup_render(bpy)
     scene.render.resolution_x, scene.render.resolution_y = RES
     paths, info_out = {}, {}
@@ -195,6 +196,14 @@ def build(args, tmp):
             info_out.setdefault("rays", {})[n] = time.perf_counter() - t0
             save(f"rays{n}")
             scene.relight.cycles_shadows = "SPHERES"
+            assert bpy.ops.relight.update() == {"FINISHED"}
+        if n in getattr(args, "maps", ()):
+            scene.relight.eevee_shadows = "MAPS"
+            t0 = time.perf_counter()
+            assert bpy.ops.relight.update() == {"FINISHED"}
+            info_out.setdefault("maps", {})[n] = time.perf_counter() - t0
+            save(f"maps{n}")
+            scene.relight.eevee_shadows = "SPHERES"
             assert bpy.ops.relight.update() == {"FINISHED"}
     return paths, info_out
 

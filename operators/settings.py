@@ -92,6 +92,15 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                ("SPHERES", "Spheres", "Cycles shows the spheres' shadows, as EEVEE does")),
         description="How Cycles renders the moving virtual objects' shadows on the relit "
                     "surfaces (takes effect on Update)")
+    eevee_shadows: EnumProperty(
+        name="EEVEE Moving Shadows", default="MAPS",
+        items=(("MAPS", "Shadow Maps", "EEVEE draws the moving virtual objects' real meshes "
+                                       "into its soft shadow maps (two lamps; others use "
+                                       "spheres): compiles as fast with any sphere count"),
+               ("SPHERES", "Spheres", "EEVEE shows the spheres' shadows, as Cycles does "
+                                      "without rays; compiling grows with the count")),
+        description="How EEVEE renders the moving virtual objects' shadows on the relit "
+                    "surfaces (takes effect on Update)")
     overlay: EnumProperty(name="Overlay", items=OVERLAY_ITEMS, default="NONE",
                           update=update_overlay,
                           description="Draw the last precompute's radiosity elements or links "

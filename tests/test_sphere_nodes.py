@@ -11,11 +11,14 @@ precomputed at draft; Suzanne, Relight Role "virtual" with Moving shadows, above
   two frames, where the twin says the shadow is.
 * Through the operators: Update fits a new object, follows a new sphere count, and a deleted
   object's shadow goes away; save and reopen keep the groups.
+* EEVEE's shadow maps (the default; eevee_shadow.py) and Cycles' rays (5.1+) against Cycles'
+  own direct light with and without the object; the spheres' twin beside them.
 * Settled shadows (Update ray-traces the real mesh's shadow where the object stands): against
   Cycles' own direct-light bake of the floor with and without the object, closer than the
   spheres; the materials take them while the object stays, the spheres' once it moves.  The
   other tests turn settling off to see the spheres everywhere.
 """
+import contextlib
 import importlib
 import json
 import os
@@ -61,6 +64,7 @@ def _inserted_monkey(spheres):
     scene = bpy.context.scene
     scene.relight.preset = "draft"
     scene.relight.cycles_shadows = "SPHERES"
+    scene.relight.eevee_shadows = "SPHERES"
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     monkey = _monkey(spheres=spheres)
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -74,6 +78,7 @@ def room():
     bpy.context.scene.relight.preset = "draft"
     bpy.context.scene.relight.settle = False     # the spheres' shadows everywhere (see below)
     bpy.context.scene.relight.cycles_shadows = "SPHERES"   # Cycles shows them too (their twin)
+    bpy.context.scene.relight.eevee_shadows = "SPHERES"    # and EEVEE (one output for both)
     assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
     monkey = _monkey()
     assert bpy.ops.relight.update() == {"FINISHED"}
@@ -300,7 +305,8 @@ def _camera_over_floor(size):
     scene.cycles.use_denoising = False
     scene.eevee.taa_render_samples = 1
     scene.cycles.max_bounces = 0
-    scene.render.filter_size = 0.01
+    scene.render.filter_size = 0.01     # EEVEE's pixel filter; Cycles' below: the centres
+    scene.cycles.filter_width = 0.01
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.render.image_settings.file_format = "OPEN_EXR"
@@ -547,9 +553,28 @@ def test_undo_and_redo_an_inserted_moving_object():
     assert wired() == (True, True)
 
 
+@contextlib.contextmanager
+def _probes_off():
+    """EEVEE's shadow probes (eevee_shadow.py) off: they light the relit objects' BSDFs, which
+    the truth bakes and renders below give them."""
+    es = importlib.import_module(PKG + ".relight_addon.blender.eevee_shadow")
+    scene = bpy.context.scene
+    key = _nodes().scene_key(scene)
+    es.show(scene, key, False)
+    try:
+        yield
+    finally:
+        es.show(scene, key, True)
+
+
 def _direct_bake(obj, samples=256):
     """Cycles' direct diffuse light on ``obj`` (white diffuse), per texel of its photo's size,
     from the lamps alone (the relit surfaces, which emit, are made plain diffuse meanwhile)."""
+    with _probes_off():
+        return _direct_bake_now(obj, samples)
+
+
+def _direct_bake_now(obj, samples):
     scene = bpy.context.scene
     plain = bpy.data.materials.new("direct_bake_plain")
     swapped = []
@@ -751,6 +776,28 @@ def test_a_drag_settles_when_it_stops():
     assert {n.image.name for n in settled_tex} == {"Floor_mat_img.relight.settled.0"}
 
 
+def _scores(monkey, with_obj, without, shadowed, plain, a, P):
+    """Lamp A's shadow factor 1 - a (1 - V) of Suzanne on the floor, per texel or pixel: (the
+    truth's, from Cycles' direct light with and without her; the render's, shadowed over
+    plain; the spheres' twin's; lit, the shadow, far from any shadow) as boolean masks."""
+    lit = without > 0.05 * without.max()
+    v_true = np.where(lit, with_obj / np.maximum(without, 1e-9), 1.0)
+    want = 1 - a * (1 - v_true)
+    got = np.where(plain > 1e-6, shadowed / np.maximum(plain, 1e-6), 1.0)
+    sn = _nodes()
+    group = next(g for g in bpy.data.node_groups if g.get(sn.OBJECT_KEY) == "Monkey")
+    centres, radii, hull = sn.group_spheres(group)
+    M = np.array(monkey.matrix_world)
+    lamp = bpy.data.objects["LampA"]
+    v_sph = sphere_visibility(to_local(P, M), to_local(np.array(lamp.location)[None], M)[0],
+                              _lamp_radius(lamp) / float(np.mean(monkey.scale)),
+                              centres, radii, hull).reshape(a.shape)
+    spheres = 1 - a * (1 - v_sph)
+    shadow = lit & ((want < 0.95) | (got < 0.95) | (spheres < 0.95))
+    far = lit & (want > 0.999) & (spheres > 0.999)     # no shadow there by either
+    return want, got, spheres, lit, shadow, far
+
+
 RAY_FARM = r"""
 scene.cycles.samples = 16
 monkey = bpy.data.objects["Monkey"]
@@ -824,22 +871,10 @@ def test_cycles_rays_give_the_real_mesh_s_moving_shadow(tmp_path):
     finally:
         bpy.data.lights["LampB"].energy = energy_b
         bpy.context.view_layer.update()
-    lit = without > 0.05 * without.max()
-    v_true = np.where(lit, with_obj / np.maximum(without, 1e-9), 1.0)
-    want = 1 - a * (1 - v_true)
-    got = np.where(plain > 1e-6, shadowed / np.maximum(plain, 1e-6), 1.0)
-    group = next(g for g in bpy.data.node_groups if g.get(sn.OBJECT_KEY) == "Monkey")
-    centres, radii, hull = sn.group_spheres(group)
-    M = np.array(monkey.matrix_world)
-    lamp = bpy.data.objects["LampA"]
-    v_sph = sphere_visibility(to_local(P, M), to_local(np.array(lamp.location)[None], M)[0],
-                              _lamp_radius(lamp) / float(np.mean(monkey.scale)),
-                              centres, radii, hull).reshape(16, 16)
-    spheres = 1 - a * (1 - v_sph)
-    shadow = lit & ((want < 0.95) | (got < 0.95) | (spheres < 0.95))
+    want, got, spheres, lit, shadow, far = _scores(monkey, with_obj, without, shadowed, plain,
+                                                   a, P)
     err_rays = np.abs(got - want)[shadow].mean()
     err_sph = np.abs(spheres - want)[shadow].mean()
-    far = lit & (want > 0.999) & (spheres > 0.999)     # no shadow there by either
     print(f"{int(shadow.sum())} shadow texels: |factor - Cycles| rays {err_rays:.3f}, "
           f"spheres {err_sph:.3f}; far from it rays {got[far].min():.4f}-{got[far].max():.4f}")
     assert np.isfinite(got).all() and shadow.sum() >= 5 and (want < 0.6).sum() >= 2
@@ -861,8 +896,186 @@ def test_cycles_rays_give_the_real_mesh_s_moving_shadow(tmp_path):
     # the shadow followed the keyframed object (pixels of 4 m / 32)
     assert np.linalg.norm(np.subtract(farm["1"]["centre"], farm["20"]["centre"])) > 3
     scene.relight.cycles_shadows = "SPHERES"
+    scene.relight.eevee_shadows = "SPHERES"          # (EEVEE's shadow maps keep the two)
     assert bpy.ops.relight.update() == {"FINISHED"}
     mat = floor.material_slots[0].material
     outs = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
     assert [n.target for n in outs] == ["ALL"]
     assert not [g for g in bpy.data.node_groups if g.get("relight_ray_object")]
+
+
+EEVEE_ENGINE = next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
+                    if e in {i.identifier for i in bpy.types.RenderSettings.bl_rna
+                             .properties["engine"].enum_items})
+
+
+def _render(tag, tmp_path):
+    scene = bpy.context.scene
+    scene.render.filepath = str(tmp_path / f"{tag}.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    try:
+        return _pixels_rgba(img)[..., :3].mean(-1)
+    finally:
+        bpy.data.images.remove(img)
+
+
+def _direct_render(tmp_path, tag, samples=256):
+    """Cycles' direct light on every relit surface made white diffuse, the probes off: what
+    the camera sees of the lamps' light alone."""
+    scene = bpy.context.scene
+    white = bpy.data.materials.new("direct_render_white")
+    if white.node_tree is None:                 # Blender before 5.0
+        white.use_nodes = True
+    white.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (1, 1, 1, 1)
+    swapped = [(s, s.material) for o in scene.objects if o.type == "MESH"
+               for s in o.material_slots if s.material is not None
+               and s.material.get("relight_generated")]
+    engine, bounces = scene.render.engine, scene.cycles.max_bounces
+    scene.render.engine, scene.cycles.samples, scene.cycles.max_bounces = "CYCLES", samples, 0
+    with _probes_off():              # (on again once the relit materials are back)
+        for slot, _ in swapped:
+            slot.material = white
+        try:
+            return _render(tag, tmp_path)
+        finally:
+            for slot, m in swapped:
+                slot.material = m
+            bpy.data.materials.remove(white)
+            scene.render.engine, scene.cycles.max_bounces = engine, bounces
+
+
+@pytest.mark.slow             # EEVEE renders, a farm process (about half a minute)
+def test_eevee_shadow_maps_give_the_real_mesh_s_moving_shadow(tmp_path):
+    """EEVEE Moving Shadows "Shadow Maps" (the default): EEVEE draws the moving object's real
+    mesh into the shadow maps of two probe lights per lamp and the relit materials read V from
+    them (eevee_shadow.py), so that compiling does not grow with the sphere count.  Suzanne
+    moved after Update, lamp A alone, a camera over the floor: EEVEE's render with the shadow
+    over the same with Suzanne out of reach is 1 - a (1 - V); against V from Cycles' direct
+    light with and without Suzanne (an independent truth) it is closer than the spheres' twin;
+    no shadow where there is none; Cycles keeps an output of its own; Restore turns the probes
+    off and Show Relit on; Spheres takes them out."""
+    addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    scene.relight.settle = False
+    assert scene.relight.eevee_shadows == "MAPS"
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey(spheres=8)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    sn = _nodes()
+    es = importlib.import_module(PKG + ".relight_addon.blender.eevee_shadow")
+    key = sn.scene_key(scene)
+    probes = es.probes(key)
+    # both lamps, one closure slot each, a shadowed and a free probe per lamp
+    assert sorted((n, sh) for n, _, sh in probes) == [("LampA", 0), ("LampA", 1),
+                                                      ("LampB", 0), ("LampB", 1)]
+    assert sorted({(n, s) for n, s, _ in probes}, key=lambda t: t[1]) in (
+        [("LampA", 0), ("LampB", 1)], [("LampB", 0), ("LampA", 1)])
+    floor = bpy.data.objects["Floor"]
+    mat = floor.material_slots[0].material
+    outs = {n.target: n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"}
+    assert set(outs) == {"EEVEE", "CYCLES"} and outs["CYCLES"].inputs["Surface"].is_linked
+    assert any(n.bl_idname == "ShaderNodeShaderToRGB" for n in mat.node_tree.nodes)
+    for obj in probes.values():
+        assert all(fc.driver.is_simple_expression for fc in obj.animation_data.drivers)
+    monkey.location = (-0.6, -0.3, 0.8)                # moved: no Update
+    _camera_over_floor(32)
+    scene.render.engine = EEVEE_ENGINE
+    scene.eevee.taa_render_samples = 16
+    energy_b = bpy.data.lights["LampB"].energy
+    bpy.data.lights["LampB"].energy = 0.0
+    bpy.context.view_layer.update()
+    try:
+        with_obj = _direct_render(tmp_path, "with")
+        monkey.hide_render = True
+        without = _direct_render(tmp_path, "without")
+        monkey.hide_render = False
+        assert not any(o.hide_render for o in es.probes(key).values())
+        shadowed = _render("eevee_shadowed", tmp_path)
+        where = tuple(monkey.location)
+        monkey.location = (0.0, 0.0, 40.0)             # out of every lamp's reach
+        bpy.context.view_layer.update()
+        plain = _render("eevee_plain", tmp_path)
+        # Cycles renders its own output: the rays' shadow, or the spheres' without rays
+        scene.render.engine, scene.cycles.samples = "CYCLES", 64
+        plain_c = _render("cycles_plain", tmp_path)
+        monkey.location = where
+        bpy.context.view_layer.update()
+        shadowed_c = _render("cycles_shadowed", tmp_path)
+        # the map's direct part and the world positions, at the pixels' centres
+        floor.material_slots[0].material = _alpha_material(mat.node_tree.nodes["M LampA"].image)
+        a = _render("alpha", tmp_path)
+        floor.material_slots[0].material = _position_material()
+        P = _render_rgb("position", tmp_path).reshape(-1, 3)
+        floor.material_slots[0].material = mat
+    finally:
+        bpy.data.lights["LampB"].energy = energy_b
+        bpy.context.view_layer.update()
+    want, got, spheres, lit, shadow, far = _scores(monkey, with_obj, without, shadowed, plain,
+                                                   a, P)
+    err_maps = np.abs(got - want)[shadow].mean()
+    err_sph = np.abs(spheres - want)[shadow].mean()
+    got_c = np.where(plain_c > 1e-6, shadowed_c / np.maximum(plain_c, 1e-6), 1.0)
+    rays = hasattr(bpy.types, "ShaderNodeRaycast")
+    err_c = np.abs(got_c - (want if rays else spheres))[shadow].mean()
+    print(f"{int(shadow.sum())} shadow pixels: |factor - Cycles| maps {err_maps:.3f}, "
+          f"spheres {err_sph:.3f}; far from it maps {got[far].min():.4f}-{got[far].max():.4f}; "
+          f"Cycles' output against {'the truth' if rays else 'the spheres'} {err_c:.3f}")
+    assert err_c < (0.05 if rays else 2e-3)     # (the spheres: their twin, within half floats)
+    assert np.isfinite(got).all() and shadow.sum() >= 50 and (want < 0.6).sum() >= 20
+    assert err_maps < 0.05 and err_maps < 0.5 * err_sph    # measured 0.037 against 0.102
+    assert far.sum() >= 100 and got[far].min() > 0.97 and abs(np.median(got[far]) - 1) < 1e-3
+    # the probes follow their lamp (drivers, no Update)
+    lamp_a = bpy.data.objects["LampA"]
+    lamp_a.location.x += 0.25
+    bpy.context.view_layer.update()
+    for (name, _, _), obj in es.probes(key).items():
+        ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        assert np.allclose(ev.matrix_world.translation,
+                           bpy.data.objects[name].matrix_world.translation, atol=1e-5)
+    lamp_a.location.x -= 0.25
+    bpy.context.view_layer.update()
+    # a farm renders it from the .blend alone (no extension, Python auto-run off), the object
+    # keyframed: its shadow at frames 1 and 20 is where it stands then
+    monkey.keyframe_insert("location", frame=20)
+    monkey.location = FRAMES[20]
+    monkey.keyframe_insert("location", frame=1)
+    scene.render.engine = EEVEE_ENGINE
+    path = os.path.join(str(tmp_path), "maps.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    farm = _farm(RAY_FARM, path, str(tmp_path / "maps"))
+    print("farm:", farm)
+    for f in farm.values():
+        assert f["finite"] and f["shadowed"] >= 5 and f["darkest"] < 0.6
+    assert np.linalg.norm(np.subtract(farm["1"]["centre"], farm["20"]["centre"])) > 3
+    # Restore Originals: the probes off (they would light the user's materials), back on with
+    # the relit materials
+    assert bpy.ops.relight.restore_originals() == {"FINISHED"}
+    assert all(o.hide_render for o in es.probes(key).values())
+    assert bpy.ops.relight.show_relit() == {"FINISHED"}
+    assert not any(o.hide_render for o in es.probes(key).values())
+    # Spheres: the probes, their collections and the Cycles output go (Cycles' own rays stay
+    # where Blender has them)
+    scene.relight.eevee_shadows = "SPHERES"
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert not es.probes(key) and not [c for c in bpy.data.collections
+                                       if c.get(es.COLLECTION_KEY)]
+    mat = floor.material_slots[0].material
+    assert not any(n.bl_idname == "ShaderNodeShaderToRGB" for n in mat.node_tree.nodes)
+    targets = sorted(n.target for n in mat.node_tree.nodes
+                     if n.bl_idname == "ShaderNodeOutputMaterial")
+    assert targets == (["CYCLES", "EEVEE"] if hasattr(bpy.types, "ShaderNodeRaycast")
+                       else ["ALL"])
+
+
+def _render_rgb(tag, tmp_path):
+    scene = bpy.context.scene
+    scene.render.filepath = str(tmp_path / f"{tag}.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    try:
+        return _pixels_rgba(img)[..., :3]
+    finally:
+        bpy.data.images.remove(img)

@@ -6,12 +6,13 @@ installed (render farms), which is why every live quantity goes through one.
 from __future__ import annotations
 
 
-def add_driver(socket, expression, variables):
-    """A SCRIPTED driver on ``socket``'s default value: ``expression`` over ``variables``, each
-    (name, kind, target, what): kind "TRANSFORMS" reads the world-space transform channel
-    ``what`` of the object ``target`` (rotations as a quaternion), any other kind is the ID
-    type of ``target`` whose property at the data path ``what`` is read."""
-    fc = socket.driver_add("default_value")
+def add_driver(socket, expression, variables, prop="default_value", index=-1):
+    """A SCRIPTED driver on ``socket``'s default value (or on its property ``prop``, element
+    ``index``): ``expression`` over ``variables``, each (name, kind, target, what): kind
+    "TRANSFORMS" reads the world-space transform channel ``what`` of the object ``target``
+    (rotations as a quaternion), any other kind is the ID type of ``target`` whose property at
+    the data path ``what`` is read."""
+    fc = socket.driver_add(prop, index)
     for mod in list(fc.modifiers):
         fc.modifiers.remove(mod)
     drv = fc.driver
@@ -34,6 +35,18 @@ def add_driver(socket, expression, variables):
             t.data_path = what
     drv.expression = expression
     return fc
+
+
+def copy_driver(fc, owner, prop, index=-1):
+    """The driver of F-curve ``fc`` (as add_driver makes them) on ``owner``'s ``prop``."""
+    variables = []
+    for var in fc.driver.variables:
+        t = var.targets[0]
+        if var.type == "TRANSFORMS":
+            variables.append((var.name, "TRANSFORMS", t.id, t.transform_type))
+        else:
+            variables.append((var.name, t.id_type, t.id, t.data_path))
+    return add_driver(owner, fc.driver.expression, variables, prop, index)
 
 
 def ratio_expression(var, value0) -> str:

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import ids, materials, read, state, write
+from . import eevee_shadow, ids, materials, read, state, write
 
 
 class PipelineError(Exception):
@@ -524,6 +524,7 @@ def update(context, progress=None) -> Outcome:
 def restore(scene) -> int:
     """The user's materials back on this scene's relit objects (the relit ones are kept)."""
     n = materials.restore_originals(scene)
+    eevee_shadow.show(scene, ids.scene_key(scene), False)   # they would light the user's
     if state.status(scene):
         state.update_status(scene, restored=True)
     return n
@@ -532,6 +533,7 @@ def restore(scene) -> int:
 def show_relit(scene) -> int:
     """This scene's relit materials shown again where Restore put the originals back."""
     n = materials.reapply(scene)
+    eevee_shadow.show(scene, ids.scene_key(scene), True)
     if state.status(scene):
         state.update_status(scene, restored=False)
     return n

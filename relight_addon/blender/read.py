@@ -884,6 +884,8 @@ def read_scene(context_or_scene, depsgraph=None, roles=None, virtual=(), lamps=N
         obj = ev.original
         if obj.type not in GEOMETRY_TYPES and obj.type != "LIGHT":
             continue
+        if ids.is_generated(obj):            # Relight's own (the moving shadows' probes)
+            continue
         parent = inst.parent.original if inst.is_instance and inst.parent is not None else None
         if parent is not None and parent == obj and obj.type != "MESH":
             # a curve's or text's own geometry, also listed as an instance of itself (it is

@@ -24,7 +24,11 @@ map image's alpha).  Nothing runs in Python at render time:
 
 * Cycles, where Blender has the Raycast node (5.1+) and the scene's Cycles Moving Shadows is
   "Rays": the materials get a second output, for Cycles, whose factors take V from rays cast at
-  the objects' real meshes (ray_shadow.py); the spheres then serve EEVEE alone.
+  the objects' real meshes (ray_shadow.py).
+* EEVEE, where the scene's EEVEE Moving Shadows is "Shadow Maps": the material's own output
+  takes V of (at most) two lamps from EEVEE's shadow maps of probe lights (eevee_shadow.py), and
+  a second output serves Cycles (rays, or the spheres).  The spheres' reach branches stay (the
+  reach tests are shared by both outputs); EEVEE then compiles no sphere for those lamps.
 
 So a keyframed object renders its moving shadows in Cycles and EEVEE from the .blend alone, with
 the extension absent and Python auto-run off.  Deforming the mesh or changing the sphere count
@@ -49,7 +53,7 @@ import numpy as np
 from ..core.relight.settled import object_visibility, visibility_images
 from ..core.relight.sphere_shadow import EPS_ANGLE, SUN_DISTANCE, bounding_sphere
 from ..core.relight.spheres import fit_spheres, silhouette_sphere
-from . import ids, ray_shadow
+from . import eevee_shadow, ids, ray_shadow
 from .drivers import add_driver, frame_vars, world_point_expressions
 from .ids import MAP_SOURCE, scene_key
 from .images import CONTENT, MapWriter
@@ -70,7 +74,7 @@ SURFACE_KEY = "relight_sphere_surface" # on a relit material: the closure its ou
 DIRECT_KEY = "relight_direct_max"      # on a map image: its largest alpha, for its content hash
 RAYS_KEY = "relight_sphere_rays"     # on a relit material: its own output was set to EEVEE
 CYCLES_OUTPUT = f"{NODE_PREFIX} Cycles output"
-WIRING_VERSION = 4                     # of the material wiring (older wirings are made again)
+WIRING_VERSION = 5                     # of the material wiring (older wirings are made again)
 # A map whose direct part (alpha) stays below this everywhere gets no sphere shadow: dropping
 # it changes the lamp's term by at most this fraction (the half-float maps' own spacing is 1e-3).
 DIRECT_FLOOR = 1e-3
@@ -596,7 +600,8 @@ def _unwire(mat):
         tree.links.new(own.outputs[0], surface)
 
 
-def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, rays=()):
+def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, rays=(),
+                   probes=None):
     """(Re)wire ``mat``'s shadow factors; nothing is touched when the wiring would be the same
     (a rebuilt tree makes every engine compile the material's shader again).  ``settled``:
     (settled group, settled images) or None.  ``cull`` False: every lamp term evaluates the
@@ -613,16 +618,19 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
     holds the settled shadow and the reach is 0 while the objects stand where it was traced (a
     constant factor: Cycles keeps only that branch).
 
-    ``rays`` (ray_shadow's groups, Blender 5.1+): the material's own output then serves EEVEE
-    only, and a second output serves Cycles: one Emission of T x (sum of the lamp terms, each
-    shadowed term's factor taking V from the rays towards a point of the lamp, or the settled
-    V while the objects stand where it was traced)."""
+    ``probes`` ({lamp name: slot}, eevee_shadow.py): those lamps' V comes from EEVEE's shadow
+    maps of the probe lights in the material's own output, which then serves EEVEE only.
+    ``rays`` (ray_shadow's groups, Blender 5.1+): likewise, a second output then serves Cycles:
+    one Emission of T x (sum of the lamp terms, each shadowed term's factor taking V from the
+    rays towards a point of the lamp, or the settled V while the objects stand where it was
+    traced).  With probes and no rays that second output takes V from the spheres."""
     tree = mat.node_tree
     flag_group, settled_images = settled if settled is not None else (None, [])
     terms = shadowed_terms(mat, lamp_group_of, cull) if sphere_groups else []
     rays = list(rays) if sphere_groups else []
+    probes = {n: s for n, s in (probes or {}).items() if n in {t[0] for t in terms}}
     signature = repr((WIRING_VERSION, cull, sorted((g.name, g.get(FIT_KEY, "")) for g in sphere_groups),
-                      sorted((g.name, g.get(FIT_KEY, "")) for g in rays),
+                      sorted((g.name, g.get(FIT_KEY, "")) for g in rays), sorted(probes.items()),
                       sorted(t[0] for t in terms),
                       None if flag_group is None else
                       (flag_group.get("relight_settled_run"),
@@ -683,7 +691,8 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
         still = math("SUBTRACT", 1.0, flag, "Moving", (x0 + 200, 400))
     closures = []
     wired = {t[0] for t in terms}
-    ray_terms = []                       # (lamp node, term, alpha, reach, plain term)
+    ray_terms = []             # (lamp node, term, alpha, reach, plain term, spheres' V)
+    probe_vis = {}                       # slot: V of its probes
     for lname, m_node, s_node in terms:
         y = s_node.location.y - 60
         lamp = node("ShaderNodeGroup", f"Lamp {lname}", (x0, y))
@@ -702,6 +711,13 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
                            (x0 + 400, y - 120 * i))
                 reach = math("MAXIMUM", reach, g.outputs["Reach"], "Reach",
                              (x0 + 400, y - 120 * i - 60))
+        sphere_vis = vis
+        if lname in probes:              # EEVEE's shadow maps (the spheres serve Cycles)
+            slot = probes[lname]
+            if slot not in probe_vis:
+                probe_vis[slot] = eevee_shadow.visibility(node, math, tree, slot,
+                                                          (x0 - 1400, 900 + 300 * slot))
+            vis = probe_vis[slot]
         alpha = m_node.outputs["Alpha"]
         # where the map has no direct part (a = 0: the lamp's real shadow, faces turned away)
         # the factor below is exactly 1: those points are out of reach too
@@ -745,7 +761,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
         shadowed = emission(s_node.outputs[0], f"Shadowed {lname}", (x1, y - 60))
         if not cull:                     # reach taken as 1: the spheres everywhere
             reach = still
-        ray_terms.append((lamp, term, alpha, reach, plain))
+        ray_terms.append((lamp, term, alpha, reach, plain, sphere_vis))
         if reach is None:
             closures.append(shadowed)
             continue
@@ -771,31 +787,33 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
         tree.links.new(c, add.inputs[1])
         out = add.outputs[0]
     tree.links.new(out, surface)
-    if rays:
-        _wire_rays(mat, node, math, emission, geo, ray_terms, rest, rays, surface.node,
-                   (x0, x1))
+    if rays or probes:
+        _wire_cycles(mat, node, math, emission, geo, ray_terms, rest, rays, surface.node,
+                     (x0, x1))
     return 1
 
 
-def _wire_rays(mat, node, math, emission, geo, ray_terms, rest, rays, own_out, xs):
+def _wire_cycles(mat, node, math, emission, geo, ray_terms, rest, rays, own_out, xs):
     """The Cycles output of a material wired by _wire_material (see there): each shadowed lamp
     term on the same reach branch as the spheres' (the reach tests are computed once, both
-    outputs use them: Cycles compiles only the nodes its output needs), with V from the rays."""
+    outputs use them: Cycles compiles only the nodes its output needs), with V from the rays,
+    or without rays from the spheres."""
     tree = mat.node_tree
     x0, x1 = xs
     own_out.target = "EEVEE"
     mat[RAYS_KEY] = 1
-    target = ray_shadow.target_group(mat.get(ids.SCENE_KEY))
+    target = ray_shadow.target_group(mat.get(ids.SCENE_KEY)) if rays else None
     closures = []
-    for idx, (lamp, term, alpha, reach, plain) in enumerate(ray_terms):
+    for idx, (lamp, term, alpha, reach, plain, sphere_vis) in enumerate(ray_terms):
         y = lamp.location.y - 400
-        tgt = node("ShaderNodeGroup", "Ray target", (x0 + 200, y))
-        tgt.node_tree = target
-        tree.links.new(geo.outputs["Position"], tgt.inputs["Position"])
-        tree.links.new(lamp.outputs["Position"], tgt.inputs["Lamp"])
-        tree.links.new(lamp.outputs["Radius"], tgt.inputs["Lamp Radius"])
-        tgt.inputs["Seed"].default_value = float(idx + 1)
-        vis = None
+        vis = None if rays else sphere_vis
+        if rays:
+            tgt = node("ShaderNodeGroup", "Ray target", (x0 + 200, y))
+            tgt.node_tree = target
+            tree.links.new(geo.outputs["Position"], tgt.inputs["Position"])
+            tree.links.new(lamp.outputs["Position"], tgt.inputs["Lamp"])
+            tree.links.new(lamp.outputs["Radius"], tgt.inputs["Lamp Radius"])
+            tgt.inputs["Seed"].default_value = float(idx + 1)
         for j, rg in enumerate(rays):
             g = node("ShaderNodeGroup", f"Ray {rg[ray_shadow.RAY_OBJECT_KEY]}",
                      (x0 + 400, y - 120 * j))
@@ -851,14 +869,49 @@ def _use_rays(scene, rays):
     return bool(rays) and ray_shadow.available()
 
 
+def _use_maps(scene, maps):
+    """Whether EEVEE takes the moving shadows from its shadow maps (eevee_shadow.py): the
+    scene's setting ("EEVEE Moving Shadows") unless ``maps`` says."""
+    if maps is None:
+        maps = getattr(getattr(scene, "relight", None), "eevee_shadows", "MAPS") == "MAPS"
+    return bool(maps) and eevee_shadow.available()
+
+
+def _material_users(scene):
+    users = {}
+    for obj in scene.objects:
+        for slot in getattr(obj, "material_slots", ()):
+            if slot.material is not None:
+                users.setdefault(slot.material.name, set()).add(obj.name)
+    return users
+
+
+def _probe_slots(scene, key, mats, lamps, objs, cull):
+    """{material name: {lamp name: probe slot}}: the lamps whose V EEVEE takes from the probes
+    (eevee_shadow.py) in each relit material all of whose objects the probes may light; the
+    lamps shadowed in the most such materials get the slots."""
+    recv = eevee_shadow.receivers(scene, key)
+    names = {o.name for o in recv}
+    users = _material_users(scene)
+    eligible = [m for m in mats if users.get(m.name) and users[m.name] <= names]
+    count = {}
+    for m in eligible:
+        for lname, _, _ in shadowed_terms(m, lamps, cull):
+            count[lname] = count.get(lname, 0) + 1
+    order = sorted(count, key=lambda n: (-count[n], n))
+    slots = eevee_shadow.sync(scene, key, lamps, order, recv, objs)
+    return {m.name: slots for m in eligible} if slots else {}
+
+
 def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=True,
-         rays=None) -> dict:
+         rays=None, maps=None) -> dict:
     """Bring the moving objects' sphere shadows of ``scene``'s relit materials up to date: fit
     (again) the objects whose mesh or sphere count changed, drop the groups of objects that are
     no longer moving, settle their shadows where they stand (with ``result``, the scene's last
     ShadowFreeResult; without it the settled shadows are kept while the objects' meshes are the
     same), and wire every relit material (``cull``: see _wire_material; ``rays``: Cycles' shadows
-    from rays, see _use_rays).  Returns a summary."""
+    from rays, see _use_rays; ``maps``: EEVEE's from its shadow maps, see _use_maps).  Returns
+    a summary."""
     key = scene_key(scene)
     if key is None:
         return {"objects": 0, "fitted": 0, "materials": 0}
@@ -912,19 +965,36 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
     settled = None if flag_group is None else (flag_group, _settled_images(key))
     lamps = lamp_groups(key)
     mats = [m for m in bpy.data.materials if ids.ours(m, key) and m.node_tree is not None]
-    wired = sum(_wire_material(m, lamps, wanted, settled, cull, rays_wanted) for m in mats)
-    tests = len(lamps) * sum(len(group_spheres(g)[1]) for g in wanted)
+    probe_of = _probe_slots(scene, key, mats, lamps, objs, cull) \
+        if wanted and _use_maps(scene, maps) else {}
+    if not probe_of:
+        eevee_shadow.remove(key)
+    wired = sum(_wire_material(m, lamps, wanted, settled, cull, rays_wanted,
+                               probe_of.get(m.name)) for m in mats)
+    probed = set().union(*[set(v) for v in probe_of.values()]) if probe_of else set()
+    spheres = sum(len(group_spheres(g)[1]) for g in wanted)
+    # spheres evaluated per shading point: in EEVEE for the lamps without probes, in Cycles
+    # for every lamp unless it casts rays
+    eevee_tests = (len(lamps) - len(probed)) * spheres
+    cycles_tests = 0 if rays_wanted else len(lamps) * spheres
+    tests = max(eevee_tests, cycles_tests)
     warnings = []
+    left = sorted({t[0] for m in mats for t in shadowed_terms(m, lamps, cull)} - probed)
+    if probe_of and left:
+        warnings.append(f"EEVEE: the moving objects' shadows of {', '.join(left)} come from "
+                        f"spheres (its shadow maps serve {eevee_shadow.SLOTS} lamps)")
     if tests > EEVEE_SPHERE_TESTS:
-        warnings.append(
-            f"Moving objects: {tests} sphere tests in every relit material ({len(lamps)} lamps x "
-            f"{tests // max(len(lamps), 1)} spheres); EEVEE may take minutes to compile that "
-            f"many or fail (measured on 2 cores: {EEVEE_SPHERE_TESTS} took about 2 minutes, 512 "
-            + ("failed): lower the objects' Spheres (Cycles casts rays instead)" if rays_wanted
-               else "failed) and every Cycles frame takes longer to prepare and to shade with "
-                    "the count (2 lamps x 128 spheres: some 7 s before the first sample): lower "
-                    "the objects' Spheres"))
+        costs = []
+        if eevee_tests > EEVEE_SPHERE_TESTS:
+            costs.append(f"EEVEE may take minutes to compile that many or fail (measured on 2 "
+                         f"cores: {EEVEE_SPHERE_TESTS} took about 2 minutes, 512 failed)")
+        if cycles_tests > EEVEE_SPHERE_TESTS:
+            costs.append("every Cycles frame takes longer to prepare and to shade with the "
+                         "count (2 lamps x 128 spheres: some 7 s before the first sample)")
+        warnings.append(f"Moving objects: {tests} sphere tests in every relit material "
+                        f"({tests // max(spheres, 1)} lamps x {spheres} spheres); "
+                        + "; ".join(costs) + ": lower the objects' Spheres")
     return {"objects": len(wanted), "fitted": fitted, "materials": wired,
             "settled": flag_group is not None, "settle_seconds": settled_s,
-            "rays": bool(rays_wanted),
+            "rays": bool(rays_wanted), "probes": sorted(probed),
             "warnings": warnings}

@@ -244,6 +244,9 @@ def clear_relight_data(scene, keep_volume=False, keep_images=()) -> dict:
     groups = [g for g in bpy.data.node_groups if ids.ours(g, key)]    # lamp and sphere groups
     for g in groups:
         bpy.data.node_groups.remove(g)
+    if not keep_volume:
+        from . import eevee_shadow
+        eevee_shadow.remove(key)          # the moving shadows' probe lights
     for obj in [o for o in bpy.data.objects if ids.ours(o, key) and not keep_volume]:  # EEVEE's
         data = obj.data
         bpy.data.objects.remove(obj)
