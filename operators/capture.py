@@ -9,6 +9,7 @@ as an ERROR and leaves the scene as it was.
 """
 
 import os
+import threading
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
@@ -130,6 +131,33 @@ class RELIGHT_OT_calibration_board(_BoardOperator, bpy.types.Operator):
         return {'FINISHED'}
 
 
+class _CaptureRunner(JobRunner):
+    """An operator whose work is a capture job (``job_class(op, context)``: every check and
+    what must be written before the work, ``compute(progress)`` bpy-free, ``finish(context,
+    result)`` writing and returning the report, ``abandon()`` undoing what ``__init__`` wrote)
+    run by JobRunner: synchronously from a script, in a worker thread with Esc in the UI."""
+
+    job_class = None
+
+    def _prepare(self, context, *args):
+        capture = _core()[0]
+        try:
+            return self.job_class(self, context)
+        except capture.CaptureError as ex:
+            self.report({'ERROR'}, str(ex))
+        except ImportError as ex:            # xatlas for an unwrap, OpenCV for the rest
+            self.report({'ERROR'}, f"{ex.name or 'A library'} is not available: check the "
+                                   "Relight dependencies")
+        return None
+
+    def _abandon(self, context, job):
+        job.abandon()
+
+    def _finish(self, context, job, result):
+        self.report({'INFO'}, job.finish(context, result))
+        return {'FINISHED'}
+
+
 # ------------------------------------------------------------------------------------------
 # calibrate_camera
 # ------------------------------------------------------------------------------------------
@@ -150,7 +178,8 @@ def _distortion_flags(cv2, model):
 
 
 def detect_folder(directory, spec, report_progress=None):
-    """{photo path: Detection} of every image of a folder, and their common size (w, h)."""
+    """{photo path: Detection} of every image of a folder, and their common size (w, h).
+    ``report_progress(fraction, photos done, photos)`` after each photo."""
     capture, board, calibration, _ = _core()
     paths = calibration.list_images(directory)
     det = board.Detector(spec)
@@ -166,20 +195,22 @@ def detect_folder(directory, spec, report_progress=None):
                 f"{size[0]} x {size[1]}, {os.path.basename(path)} is {s[0]} x {s[1]}")
         out[path] = det.detect(img)
         if report_progress:
-            report_progress((i + 1) / len(paths))
+            report_progress((i + 1) / len(paths), i + 1, len(paths))
     return out, size
 
 
-class RELIGHT_OT_calibrate_camera(_BoardOperator, bpy.types.Operator):
+class RELIGHT_OT_calibrate_camera(_CaptureRunner, _BoardOperator, bpy.types.Operator):
     """Calibrate the camera from photos of the ChArUco board in a folder: write the intrinsics
     and distortion as an OpenCV FileStorage file (YAML or XML) and set the active camera's
     lens, sensor fit and shift and the scene's resolution so that its K is the one measured.
     Blender renders without distortion: use undistorted photos (written on request) as
-    backgrounds, or the distortion in the file for movie-clip tracking"""
+    backgrounds, or the distortion in the file for movie-clip tracking (interactively in a
+    worker thread, with progress in the status bar and Esc to cancel)"""
 
     bl_idname = "relight.calibrate_camera"
     bl_label = "Calibrate Camera"
     bl_options = {'REGISTER', 'UNDO'}
+    _kind = "camera calibration"
 
     directory: StringProperty(name="Photos", subtype="DIR_PATH",
                               description="Folder of photos of the board")
@@ -194,39 +225,82 @@ class RELIGHT_OT_calibrate_camera(_BoardOperator, bpy.types.Operator):
     set_camera: BoolProperty(name="Set Active Camera", default=True,
                              description="Give the active camera the calibrated K")
 
-    def execute(self, context):
+    @property
+    def job_class(self):
+        return CalibrationJob
+
+
+class CalibrationJob:
+    """Calibrate Camera's inputs checked (``__init__``, main thread), the board found in every
+    photo, the calibration solved and its files written (``compute``, bpy-free, any thread:
+    the undistorted photos first, the calibration file last, so that a cancelled or failed run
+    leaves no file of its own), the camera set (``finish``, main thread)."""
+
+    label = "camera calibration"
+    action = "calibrate"
+
+    def __init__(self, op, context):
         import cv2
-        capture, board, calibration, _ = _core()
-        directory, output = _abs(self.directory), _abs(self.output)
-        if not output:
-            return self.fail("No calibration file given (output)")
-        try:
-            calibration._storage_format(output)
-            if not os.path.isdir(os.path.dirname(output)):
-                return self.fail(f"The folder of '{output}' does not exist")
-            spec = self.spec()
-            wm = context.window_manager
-            wm.progress_begin(0, 100)
-            try:
-                dets, size = detect_folder(directory, spec,
-                                           lambda f: wm.progress_update(int(80 * f)))
-                calib = calibration.calibrate(dets, size, spec,
-                                              flags=_distortion_flags(cv2, self.distortion))
-                calib.view_rms = {os.path.basename(k): v for k, v in calib.view_rms.items()}
-                calib.rejected = {os.path.basename(k): v for k, v in calib.rejected.items()}
-                undist = _abs(self.undistorted_directory)
-                if undist and not os.path.isdir(undist):
-                    return self.fail(f"The folder '{undist}' for undistorted photos does not exist")
-                calibration.write_calibration(output, calib)
-                if undist:
-                    for path in dets:
-                        img = calibration.read_image(path)
-                        out = os.path.join(undist, os.path.basename(path))
-                        cv2.imwrite(out, calibration.undistort(img, calib))
-            finally:
-                wm.progress_end()
-        except capture.CaptureError as ex:
-            return self.fail(str(ex))
+        capture, _, calibration, _ = _core()
+        self.directory, self.output = _abs(op.directory), _abs(op.output)
+        if not self.output:
+            raise capture.CaptureError("No calibration file given (output)")
+        calibration._storage_format(self.output)
+        if not os.path.isdir(os.path.dirname(self.output)):
+            raise capture.CaptureError(f"The folder of '{self.output}' does not exist")
+        self.undistorted = _abs(op.undistorted_directory)
+        if self.undistorted and not os.path.isdir(self.undistorted):
+            raise capture.CaptureError(
+                f"The folder '{self.undistorted}' for undistorted photos does not exist")
+        self.spec = op.spec()
+        self.flags = _distortion_flags(cv2, op.distortion)
+        self.set_camera = op.set_camera
+        self._lock = threading.Lock()
+        self._written, self._abandoned = [], False
+
+    def _wrote(self, path):
+        """Keep ``path`` for abandon; remove it at once when abandon came first."""
+        with self._lock:
+            if self._abandoned:
+                os.remove(path)
+            else:
+                self._written.append(path)
+
+    def compute(self, progress=None):
+        """{calib, size}; raises CaptureError when the photos cannot calibrate."""
+        import cv2
+        _, _, calibration, _ = _core()
+        report = progress or (lambda f, m: None)
+        dets, size = detect_folder(self.directory, self.spec, lambda f, i, n: report(
+            0.8 * f, f"Finding the board in photo {i} of {n}"))
+        report(0.8, f"Calibrating from {len(dets)} photos")
+        calib = calibration.calibrate(dets, size, self.spec, flags=self.flags)
+        calib.view_rms = {os.path.basename(k): v for k, v in calib.view_rms.items()}
+        calib.rejected = {os.path.basename(k): v for k, v in calib.rejected.items()}
+        if self.undistorted:
+            for i, path in enumerate(dets):
+                report(0.9 + 0.1 * i / len(dets), f"Writing undistorted photo {i + 1} of "
+                                                  f"{len(dets)}")
+                out = os.path.join(self.undistorted, os.path.basename(path))
+                cv2.imwrite(out, calibration.undistort(calibration.read_image(path), calib))
+                self._wrote(out)
+        report(1.0, "Writing the calibration")
+        calibration.write_calibration(self.output, calib)
+        return dict(calib=calib, size=size)
+
+    def abandon(self):
+        """Remove the undistorted photos this run wrote (the calibration file comes last)."""
+        with self._lock:
+            self._abandoned = True
+            written, self._written = self._written, []
+        for path in written:
+            if os.path.exists(path):
+                os.remove(path)
+
+    def finish(self, context, out):
+        """Set the active camera; the report."""
+        _, _, calibration, _ = _core()
+        calib, size = out["calib"], out["size"]
         camera = context.scene.camera
         cam_text = "no active camera to set"
         if self.set_camera and camera is not None and camera.type == "CAMERA":
@@ -237,17 +311,15 @@ class RELIGHT_OT_calibrate_camera(_BoardOperator, bpy.types.Operator):
             cam_text = "camera left alone"
         d = calib.dist_coeffs
         shift = calibration.max_distortion_px(calib)
-        if _abs(self.undistorted_directory):
+        if self.undistorted:
             dist_text = f"the photos without it ({shift:.1f} px at most) written for backgrounds"
         elif shift > 0.5:
             dist_text = (f"Blender renders without it ({shift:.1f} px at most): set Undistorted "
                          f"Photos for backgrounds")
         else:
             dist_text = f"under {shift:.1f} px"
-        self.report({'INFO'}, f"Calibrated from {calib.summary()}; distortion k1 {d[0]:.4f}, "
-                              f"k2 {d[1]:.4f}, {dist_text}; wrote {os.path.basename(output)}; "
-                              f"{cam_text}")
-        return {'FINISHED'}
+        return (f"Calibrated from {calib.summary()}; distortion k1 {d[0]:.4f}, k2 {d[1]:.4f}, "
+                f"{dist_text}; wrote {os.path.basename(self.output)}; {cam_text}")
 
 
 # ------------------------------------------------------------------------------------------
@@ -284,33 +356,6 @@ def _frames(path):
                 cap.release()
         return None, gen(), n, None
     return [os.path.basename(path)], iter([calibration.read_image(path)]), 1, [path]
-
-
-class _CaptureRunner(JobRunner):
-    """An operator whose work is a capture job (``job_class(op, context)``: every check and
-    what must be written before the work, ``compute(progress)`` bpy-free, ``finish(context,
-    result)`` writing and returning the report, ``abandon()`` undoing what ``__init__`` wrote)
-    run by JobRunner: synchronously from a script, in a worker thread with Esc in the UI."""
-
-    job_class = None
-
-    def _prepare(self, context, *args):
-        capture = _core()[0]
-        try:
-            return self.job_class(self, context)
-        except capture.CaptureError as ex:
-            self.report({'ERROR'}, str(ex))
-        except ImportError as ex:            # xatlas for an unwrap, OpenCV for the rest
-            self.report({'ERROR'}, f"{ex.name or 'A library'} is not available: check the "
-                                   "Relight dependencies")
-        return None
-
-    def _abandon(self, context, job):
-        job.abandon()
-
-    def _finish(self, context, job, result):
-        self.report({'INFO'}, job.finish(context, result))
-        return {'FINISHED'}
 
 
 class RELIGHT_OT_camera_from_marker(_CaptureRunner, _BoardOperator, bpy.types.Operator):
@@ -480,14 +525,16 @@ ENVIRONMENT_ITEMS = (
 FLOAT_EXTENSIONS = (".exr", ".hdr")
 
 
-class RELIGHT_OT_merge_hdr(RelightOperator, bpy.types.Operator):
+class RELIGHT_OT_merge_hdr(_CaptureRunner, bpy.types.Operator):
     """Merge bracketed 8-bit photos (exposure times from EXIF or exposures.json) into a linear
     HDR OpenEXR with the recovered camera response; or write an environment map (equirect
-    OpenEXR for the World) from a mirror-ball photo or from the scene's posed frames"""
+    OpenEXR for the World) from a mirror-ball photo or from the scene's posed frames
+    (interactively in a worker thread, with progress in the status bar and Esc to cancel)"""
 
     bl_idname = "relight.merge_hdr"
     bl_label = "Merge HDR"
     bl_options = {'REGISTER', 'UNDO'}
+    _kind = "HDR merge"
 
     directory: StringProperty(name="Brackets", subtype="DIR_PATH",
                               description="Folder of bracketed photos (and exposures.json)")
@@ -509,23 +556,61 @@ class RELIGHT_OT_merge_hdr(RelightOperator, bpy.types.Operator):
                             description="An environment becomes the World's Environment "
                                         "Texture")
 
-    def fail(self, message):
-        self.report({'ERROR'}, message)
-        return {'CANCELLED'}
+    @property
+    def job_class(self):
+        return MergeJob
 
-    def _hdr_photo(self, directory):
-        """(radiance RGB float32, sentence) of the folder: brackets merged, or its one EXR."""
-        from ..relight_addon.core.capture import hdr
+
+class MergeJob:
+    """Merge HDR's inputs (``__init__``, main thread: the checks, and what only Blender reads:
+    the posed frames' photos, a mirror ball's EXR, the camera's rotation), the merge and the
+    equirect (``compute``, bpy-free, any thread), the EXR written and the World set
+    (``finish``, main thread: nothing is written before it)."""
+
+    label = "HDR merge"
+    action = "merge"
+
+    def __init__(self, op, context):
+        import numpy as np
         capture, _, calibration, _ = _core()
-        paths = calibration.list_images(directory)
+        bridge = _bridge()
+        self.output = _abs(op.output)
+        if os.path.splitext(self.output)[1].lower() != ".exr":
+            raise capture.CaptureError("The output must be an OpenEXR file (.exr)")
+        if not os.path.isdir(os.path.dirname(self.output)):
+            raise capture.CaptureError(f"The folder of '{self.output}' does not exist")
+        self.environment, self.method, self.width = op.environment, op.method, op.width
+        self.set_world = op.set_world
+        self.ball = (op.ball_x, op.ball_y, op.ball_radius)
+        self.directory = _abs(op.directory)
+        self.frames = self.skipped = self.float_photo = self.rotation = None
+        self.camera_name = None
+        if self.environment == "FRAMES":
+            self.frames, self.skipped = _posed_frames(context)
+            return
+        paths = calibration.list_images(self.directory)
         floats = [p for p in paths if os.path.splitext(p)[1].lower() in FLOAT_EXTENSIONS]
         if self.environment == "MIRROR_BALL" and len(paths) == 1 and floats:
-            return _bridge().read_float_image(floats[0]), f"{os.path.basename(floats[0])}"
-        if floats:
+            self.float_photo = (bridge.read_float_image(floats[0]), os.path.basename(floats[0]))
+        elif floats:
             raise capture.CaptureError(f"'{os.path.basename(floats[0])}' is already HDR: the "
                                        f"merge takes 8-bit brackets")
-        names, images, times = hdr.read_brackets(directory)
+        cam = context.scene.camera
+        if self.environment == "MIRROR_BALL" and cam is not None:
+            m = bridge.matrix_of(cam)
+            self.rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+            self.camera_name = cam.name
+
+    def _hdr_photo(self, report):
+        """(radiance RGB float32, sentence) of the folder: brackets merged, or its one EXR."""
+        from ..relight_addon.core.capture import hdr
+        if self.float_photo is not None:
+            return self.float_photo
+        report(0.0, "Reading the brackets")
+        names, images, times = hdr.read_brackets(self.directory)
+        report(0.2, f"Recovering the camera response from {len(images)} brackets")
         response = hdr.recover_response(images, times, self.method)
+        report(0.6, "Merging the brackets")
         if self.method == "DEBEVEC":
             res = hdr.merge(images, times, response)
         else:
@@ -538,77 +623,69 @@ class RELIGHT_OT_merge_hdr(RelightOperator, bpy.types.Operator):
                    if res.get("saturated") else ""))
         return rad, text
 
-    def _frames(self, context):
-        import numpy as np
-        capture, _, _, _ = _core()
-        bridge = _bridge()
-        scene = context.scene
-        frames, skipped = [], []
-        for ob in sorted((o for o in scene.objects if o.type == "CAMERA"), key=lambda o: o.name):
-            img = bridge.camera_photo(ob)
-            if img is None:
-                skipped.append(ob.name)
-                continue
-            rgb = bridge.photo_pixels(img)
-            size = (rgb.shape[1], rgb.shape[0])
-            if not bridge.frame_matches(scene, size):
-                raise capture.CaptureError(f"The photo of '{ob.name}' ({size[0]} x {size[1]}) does "
-                                           f"not have the render frame's shape")
-            m = bridge.matrix_of(ob)
-            rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-            frames.append((bridge.camera_K(ob, scene, size), rot, rgb))
-        if not frames:
-            raise capture.CaptureError("No camera of the scene has a photo as background image")
-        return frames, skipped
-
-    def execute(self, context):
-        import numpy as np
+    def compute(self, progress=None):
+        """(the image to write, the sentence); raises CaptureError."""
         from ..relight_addon.core.capture import hdr
-        capture, _, _, _ = _core()
-        bridge = _bridge()
-        output = _abs(self.output)
-        if os.path.splitext(output)[1].lower() != ".exr":
-            return self.fail("The output must be an OpenEXR file (.exr)")
-        if not os.path.isdir(os.path.dirname(output)):
-            return self.fail(f"The folder of '{output}' does not exist")
-        try:
-            if self.environment == "FRAMES":
-                frames, skipped = self._frames(context)
-                env, seen = hdr.frames_to_equirect(frames, self.width)
-                result = env
-                text = (f"Wrote the environment seen by {len(frames)} posed frames"
-                        + (f" ({len(skipped)} cameras without a photo skipped)" if skipped else "")
-                        + f" ({100 * seen.mean():.1f} % of directions seen, the rest filled from "
-                          f"neighbours)")
-            else:
-                rad, text = self._hdr_photo(_abs(self.directory))
-                if self.environment == "MIRROR_BALL":
-                    h, w = rad.shape[:2]
-                    centre = (self.ball_x if self.ball_x >= 0 else (w - 1) / 2,
-                              self.ball_y if self.ball_y >= 0 else (h - 1) / 2)
-                    cam = context.scene.camera
-                    rot = None
-                    if cam is not None:
-                        m = bridge.matrix_of(cam)
-                        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-                    result, _ = hdr.mirror_ball_to_equirect(
-                        rad, self.width, centre, self.ball_radius if self.ball_radius > 0 else None,
-                        rot)
-                    text = (f"Wrote the environment a mirror ball reflects, from {text}"
-                            f"{'' if cam is None else f', oriented by the camera {cam.name!r}'}")
-                else:
-                    result = rad
-                    text = f"Merged {text}"
-        except capture.CaptureError as ex:
-            return self.fail(str(ex))
-        bridge.write_exr(output, result)
+        report = progress or (lambda f, m: None)
+        if self.environment == "FRAMES":
+            env, seen = hdr.frames_to_equirect(self.frames, self.width, progress=lambda f, m:
+                                               report(0.95 * f, f"Equirect: {m}"))
+            return env, (f"Wrote the environment seen by {len(self.frames)} posed frames"
+                         + (f" ({len(self.skipped)} cameras without a photo skipped)"
+                            if self.skipped else "")
+                         + f" ({100 * seen.mean():.1f} % of directions seen, the rest filled "
+                           f"from neighbours)")
+        rad, text = self._hdr_photo(report)
+        if self.environment != "MIRROR_BALL":
+            return rad, f"Merged {text}"
+        report(0.85, "Unwrapping the mirror ball")
+        h, w = rad.shape[:2]
+        bx, by, br = self.ball
+        centre = (bx if bx >= 0 else (w - 1) / 2, by if by >= 0 else (h - 1) / 2)
+        env, _ = hdr.mirror_ball_to_equirect(rad, self.width, centre, br if br > 0 else None,
+                                             self.rotation)
+        return env, (f"Wrote the environment a mirror ball reflects, from {text}"
+                     f"{'' if self.camera_name is None else f', oriented by the camera {self.camera_name!r}'}")
+
+    def abandon(self):
+        """Nothing is written before :meth:`finish`."""
+
+    def finish(self, context, out):
+        """Write the EXR (and set the World); the report."""
+        result, text = out
+        _bridge().write_exr(self.output, result)
         h, w = result.shape[:2]
         world = ""
         if self.environment != "NONE" and self.set_world:
-            bridge.set_world_environment(context.scene, output)
+            _bridge().set_world_environment(context.scene, self.output)
             world = "; set as the World"
-        self.report({'INFO'}, f"{text}: {w} x {h} EXR {os.path.basename(output)}{world}")
-        return {'FINISHED'}
+        return f"{text}: {w} x {h} EXR {os.path.basename(self.output)}{world}"
+
+
+def _posed_frames(context):
+    """([(K, world rotation, photo RGB)] of the scene's cameras with a background photo, the
+    names of those without one)."""
+    import numpy as np
+    capture, _, _, _ = _core()
+    bridge = _bridge()
+    scene = context.scene
+    frames, skipped = [], []
+    for ob in sorted((o for o in scene.objects if o.type == "CAMERA"), key=lambda o: o.name):
+        img = bridge.camera_photo(ob)
+        if img is None:
+            skipped.append(ob.name)
+            continue
+        rgb = bridge.photo_pixels(img)
+        size = (rgb.shape[1], rgb.shape[0])
+        if not bridge.frame_matches(scene, size):
+            raise capture.CaptureError(f"The photo of '{ob.name}' ({size[0]} x {size[1]}) does "
+                                       f"not have the render frame's shape")
+        m = bridge.matrix_of(ob)
+        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        frames.append((bridge.camera_K(ob, scene, size), rot, rgb))
+    if not frames:
+        raise capture.CaptureError("No camera of the scene has a photo as background image")
+    return frames, skipped
 
 
 def _seconds(t):

@@ -199,6 +199,43 @@ def test_posed_frames_environment(tmp_path, bridge):
     assert abs(offset) < 0.02 and mean < 0.05 and p95 < 0.15, (offset, mean, p95)
 
 
+@pytest.mark.parametrize("environment, at", [("NONE", 0.2), ("FRAMES", 0.3)])
+def test_merge_hdr_cancelled_midway_changes_nothing(tmp_path, radiance, bridge, environment, at):
+    """Esc while the response is recovered (brackets) or while the posed frames are sampled
+    (an equirect): no EXR, the World untouched; the job run to its end writes it."""
+    import importlib
+    from helpers.blender import run_cancelled_at
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    folder = str(tmp_path)
+    if environment == "FRAMES":
+        scene.render.resolution_x = scene.render.resolution_y = 128
+        for i, (K, M, img) in enumerate(sc.cube_frames()):
+            cam = bpy.data.objects.new(f"Cam{i}", bpy.data.cameras.new(f"Cam{i}"))
+            scene.collection.objects.link(cam)
+            cam.data.lens, cam.data.sensor_width = 18.0, 36.0
+            bridge.set_matrix_world(cam, M)
+            path = str(tmp_path / f"frame{i}.exr")
+            bridge.write_exr(path, img)
+            bridge.set_camera_photo(cam, path)
+    else:
+        folder = _write_brackets(tmp_path / "brackets", sc.brackets(radiance, TIMES), TIMES,
+                                 exif_for=(1, 4))
+    ops = importlib.import_module("relight_ext.operators.capture")
+    precompute = importlib.import_module("relight_ext.operators.precompute")
+    out = tmp_path / "out.exr"
+    op = type("Op", (), dict(directory=folder, output=str(out), method="DEBEVEC",
+                             environment=environment, width=128, ball_x=-1.0, ball_y=-1.0,
+                             ball_radius=-1.0, set_world=True))()
+    solve = precompute.SolveJob(ops.MergeJob(op, bpy.context))
+    seen = run_cancelled_at(solve, at)
+    assert solve.state == "cancelled" and solve.result is None and max(seen) < 0.96
+    assert not out.exists() and scene.world is None
+    job = ops.MergeJob(op, bpy.context)
+    assert "EXR out.exr" in job.finish(bpy.context, job.compute())
+    assert out.exists()
+
+
 def test_environment_directions_match_blender():
     """The equirect convention: our direction of a texel, looked up by our own sampler, is
     that texel; and +X is the image centre, +Z the top row, as Blender's Environment Texture

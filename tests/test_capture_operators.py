@@ -170,6 +170,39 @@ def test_calibrate_camera_bad_input(tmp_path, calibration_photos):
     assert _camera_state(scene, cam) == state
 
 
+@pytest.mark.parametrize("at", [0.3, 0.95])
+def test_calibrate_camera_cancelled_midway_changes_nothing(tmp_path, calibration_photos, at):
+    """Esc while the board is found photo by photo (0.3) or while the undistorted photos are
+    written (0.95): no calibration file, no undistorted photo left (Esc's abandon removes the
+    ones written), the camera as it was; the same job run to its end writes them all."""
+    import importlib
+    from helpers.blender import run_cancelled_at
+    folder, images = calibration_photos
+    scene, cam = _scene()
+    state = _camera_state(scene, cam)
+    ops = importlib.import_module("relight_ext.operators.capture")
+    precompute = importlib.import_module("relight_ext.operators.precompute")
+    undist = tmp_path / "undistorted"
+    undist.mkdir()
+    out = tmp_path / "calib.yml"
+    op = type("Op", (), dict(directory=folder, output=str(out), distortion="K1K2P1P2",
+                             undistorted_directory=str(undist), set_camera=True,
+                             spec=lambda self: SPEC))()
+    job = ops.CalibrationJob(op, bpy.context)
+    solve = precompute.SolveJob(job)
+    seen = run_cancelled_at(solve, at)
+    job.abandon()                        # what the operator's Esc does
+    assert solve.state == "cancelled" and solve.result is None and max(seen) < 1.0
+    assert min(f for f in seen if f >= at) < at + 0.05      # it stopped at the next report
+    assert not out.exists() and not list(undist.iterdir())
+    assert _camera_state(scene, cam) == state
+    whole = ops.CalibrationJob(op, bpy.context)
+    done = whole.compute()
+    assert out.exists() and len(list(undist.iterdir())) == len(images)
+    assert "Calibrated from" in whole.finish(bpy.context, done)
+    assert _camera_state(scene, cam) != state
+
+
 # -- camera_from_marker --------------------------------------------------------------------------
 
 def _pose_scene(tmp_path):

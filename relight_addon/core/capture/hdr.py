@@ -272,20 +272,23 @@ def mirror_ball_to_equirect(image, width=512, centre=None, radius=None, camera_r
     return np.ascontiguousarray(env, np.float32), behind
 
 
-def frames_to_equirect(frames, width=512, feather=0.1):
+def frames_to_equirect(frames, width=512, feather=0.1, progress=None):
     """Equirect of posed frames, the environment taken as at infinity (the seed's cube map
     from the camera, sampled in world directions).  ``frames``: (K (3x3), R (3x3) world
     rotation of the Blender camera, image (H, W, 3) linear, row 0 at the top).  Each direction
     blends the frames that see it, weighted by a ramp over ``feather`` of the frame's size at
     its borders; directions no frame sees are filled from their neighbours.  Returns
-    (env, seen) with ``seen`` the directions some frame saw."""
+    (env, seen) with ``seen`` the directions some frame saw.  ``progress(fraction, text)``
+    before each frame."""
     cv2 = _cv2()
     d = equirect_directions(width)
     h = d.shape[0]
     acc = np.zeros((h, width, 3), np.float64)
     wsum = np.zeros((h, width), np.float64)
     flip = np.diag([1.0, -1.0, -1.0])             # Blender camera -> OpenCV camera axes
-    for K, R, img in frames:
+    for i, (K, R, img) in enumerate(frames):
+        if progress is not None:
+            progress(i / len(frames), f"Frame {i + 1} of {len(frames)}")
         img = np.asarray(img, np.float32)
         ih, iw = img.shape[:2]
         c = d @ (np.asarray(R, np.float64) @ flip)   # world -> OpenCV camera (row vectors)
