@@ -613,8 +613,9 @@ def write_report(res, path):
         load = res["speed"].get("load", [float("nan")] * 2)
         L += ["## Speed", "", "Whole processes (Python start-up and imports included) on this "
               "machine: 2 cores shared with other jobs, load average "
-              f"{load[0]:.1f} at the start and {load[1]:.1f} at the end, so the wall times are "
-              "those of a crowded machine; `cpu` is user + system seconds (both cores).", "",
+              f"{load[0]:.1f} at the start and {load[1]:.1f} at the end"
+              + (", so the wall times are those of a crowded machine" if max(load) > 2.5 else
+                 ", a quiet machine") + "; `cpu` is user + system seconds (both cores).", "",
               "| task | wall s | cpu s | timed by |", "|---|---|---|---|"]
         for r in res["speed"]["rows"]:
             L.append(f"| {r['task']} | {r['seconds']:.1f} | {r.get('cpu', float('nan')):.1f} | "

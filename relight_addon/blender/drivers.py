@@ -12,7 +12,7 @@ def add_driver(socket, expression, variables, prop="default_value", index=-1):
     "TRANSFORMS" reads the world-space transform channel ``what`` of the object ``target``
     (rotations as a quaternion), any other kind is the ID type of ``target`` whose property at
     the data path ``what`` is read."""
-    fc = socket.driver_add(prop, index)
+    fc = socket.driver_add(prop) if index < 0 else socket.driver_add(prop, index)
     for mod in list(fc.modifiers):
         fc.modifiers.remove(mod)
     drv = fc.driver

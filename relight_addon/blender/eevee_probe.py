@@ -127,18 +127,8 @@ def drive_intensity(scene, data):
         # characters, ~16 lamps this way
         parts = [f"{w / (p0 * level):.6g}*{var}" for var, _, p0, w in terms if p0 > 0]
         expr = "+".join(parts + ([f"{constant / level:.6g}"] if constant > 0 else []))
-        add_driver(_IntensitySocket(data), expr,
-                         [(var, "LIGHT", light, "energy") for var, light, _, _ in terms])
-
-
-class _IntensitySocket:
-    """``drivers.add_driver`` drives a socket's ``default_value``; the probe's is ``intensity``."""
-
-    def __init__(self, data):
-        self.data = data
-
-    def driver_add(self, _path):
-        return self.data.driver_add("intensity")
+        add_driver(data, expr, [(var, "LIGHT", light, "energy") for var, light, _, _ in terms],
+                   prop="intensity")
 
 
 def _set(data, name, value):
