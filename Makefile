@@ -62,9 +62,16 @@ test: $(STAMP) $(STAMP_LTS)
 	$(MAKE) --no-print-directory test-lts || status=1; \
 	exit $$status
 
+# a bound on each line's whole run (normally 14 and 2 minutes): a worker that crashed inside
+# bpy once left pytest-xdist waiting for ever (the LTS line, 2026-12-02), which CI's own limit
+# would only have ended after 90 minutes
+MAIN_LIMIT ?= 2400
+LTS_LIMIT ?= 900
+BOUNDED = timeout --kill-after=60
+
 test-main: $(STAMP)
 	$(VENV)/bin/python -c "import bpy, sys; print('main line: bpy', bpy.app.version_string, 'python', sys.version.split()[0])"
-	$(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
+	$(BOUNDED) $(MAIN_LIMIT) $(VENV)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) tests
 
 # the tests not marked slow (conftest.py): under 5 minutes, between edits
 test-quick: $(STAMP)
@@ -106,7 +113,7 @@ $(STAMP_LTS): $(REQ_LTS)
 
 test-lts: $(STAMP_LTS)
 	$(LTS)/bin/python -c "import bpy, sys; print('LTS line: bpy', bpy.app.version_string, 'python', sys.version.split()[0])"
-	$(LTS)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) $(LTS_TESTS)
+	$(BOUNDED) $(LTS_LIMIT) $(LTS)/bin/python -m pytest $(PYTEST_ARGS) $(PYTEST_JOBS) $(LTS_TESTS)
 
 # every test of both lines, from empty caches of their own (a developer's .cache, benchmarks'
 # references included, is left alone), then what they rendered becomes the shipped cache
