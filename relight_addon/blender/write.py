@@ -223,11 +223,15 @@ def _relit_material(orig, image_name, maps, lamps, key, t_image=None, uv_map=Non
 
 # -- scene-scoped state ------------------------------------------------------------------------
 
-def clear_relight_data(scene, keep_volume=False, keep_images=()) -> dict:
+STALE_PREFIX = "~relight replaced "     # a relit material on its way out (write_results)
+
+def clear_relight_data(scene, keep_volume=False, keep_images=(), stale=None) -> dict:
     """Restore ``scene``'s originals, then remove the materials and images generated for it (and
     generated ones nothing uses any more, e.g. copies made by a Full Copy of the scene) and the
     stored powers of its lights.  Other scenes' results and the user's data are untouched.
-    ``keep_images``: images to leave (a write about to take them again)."""
+    ``keep_images``: images to leave (a write about to take them again).  ``stale`` (a list):
+    the materials are renamed and put there instead of removed, for the caller to remove once
+    it has made their successors (see write_results)."""
     key = ids.scene_key(scene)
     restored = materials.restore_originals(scene)
     # and generated data nothing uses (a relit material another scene sharing objects with this
@@ -235,7 +239,12 @@ def clear_relight_data(scene, keep_volume=False, keep_images=()) -> dict:
     mats = [m for m in bpy.data.materials
             if ids.ours(m, key) or (ids.is_generated(m) and m.users == 0)]
     for m in mats:
-        bpy.data.materials.remove(m)
+        if stale is None:
+            bpy.data.materials.remove(m)
+        else:
+            m.name = f"{STALE_PREFIX}{m.name}"
+            del m[ids.GENERATED]           # no longer found as ours meanwhile
+            stale.append(m)
     keep = {im.as_pointer() for im in keep_images}
     imgs = [im for im in bpy.data.images if im.as_pointer() not in keep and
             (ids.ours(im, key) or (ids.is_generated(im) and im.users == 0))]
@@ -282,127 +291,136 @@ def write_results(context, scene_data, report, solution, lamps) -> dict:
     # the maps and textures written before: taken again where they hold the same values
     old = {im.name: im for im in bpy.data.images if ids.ours(im, key) and CONTENT in im
            and (ids.MAP_SOURCE in im or im.name.endswith(".relight.T"))}
-    clear_relight_data(scene, keep_volume=True, keep_images=old.values())  # (the EEVEE volume's
+    # the old materials go only once their successors exist: a new material allocated where a
+    # removed one was left a mesh's or object's slot byte for byte as it was, so memfile undo
+    # took that datablock as unchanged and kept a pointer to the freed material (Blender
+    # crashed building the depsgraph after a redo: deg_tag_eval_copy_id from build_material)
+    replaced = []
+    clear_relight_data(scene, keep_volume=True, keep_images=old.values(), stale=replaced)  # (the EEVEE volume's
     # bake is the user's to redo or keep)
+    try:
 
-    for lamp in lamps:
-        if lamp.light is not None and ids.editable(lamp.light):
-            lamp.light[ids.POWER0] = float(lamp.p0)
-        # where moving objects' shadows (sphere_nodes.py) see the lamp from
-        if lamp.obj is not None:
-            sphere_nodes.make_lamp_group(lamp.label, key, lamp.obj)
-        elif lamp.label in scene_data.lamp_names:
-            centre, radius = sphere_nodes.emissive_disk(
-                scene_data, scene_data.lamp_names.index(lamp.label))
-            sphere_nodes.make_lamp_group(lamp.label, key, None, centre, radius)
+        for lamp in lamps:
+            if lamp.light is not None and ids.editable(lamp.light):
+                lamp.light[ids.POWER0] = float(lamp.p0)
+            # where moving objects' shadows (sphere_nodes.py) see the lamp from
+            if lamp.obj is not None:
+                sphere_nodes.make_lamp_group(lamp.label, key, lamp.obj)
+            elif lamp.label in scene_data.lamp_names:
+                centre, radius = sphere_nodes.emissive_disk(
+                    scene_data, scene_data.lamp_names.index(lamp.label))
+                sphere_nodes.make_lamp_group(lamp.label, key, None, centre, radius)
 
-    # Materials with image faces (material name -> image index) and the objects using them.
-    group = np.asarray(scene_data.group)
-    image = np.asarray(scene_data.image) if scene_data.image is not None else np.full(len(group), -1)
-    mat_image, mat_objects, mat_uv, no_image = {}, {}, {}, set()
-    for g in np.unique(group):
-        label, mat_name = report.groups[int(g)]
-        imgs = np.unique(image[group == g])
-        with_img = imgs[imgs >= 0]
-        if len(with_img) and mat_name:
-            mat_image.setdefault(mat_name, int(with_img[0]))
-            mat_objects.setdefault(mat_name, set()).add(report.sources.get(label, label))
-            mat_uv.setdefault(mat_name, set()).add(report.uv_maps.get((label, mat_name), ""))
-        if np.any(imgs < 0) and scene_data.lamp is not None and \
-                np.any((image < 0) & (group == g) & (np.asarray(scene_data.lamp) < 0)
-                       & ~scene_data.virtual):
-            no_image.add((label, mat_name))
-    for label, mat_name in sorted(no_image):
-        warnings.append(f"'{label}' / material '{mat_name or '(none)'}': faces without an "
-                        "image texture are left unchanged")
+        # Materials with image faces (material name -> image index) and the objects using them.
+        group = np.asarray(scene_data.group)
+        image = np.asarray(scene_data.image) if scene_data.image is not None else np.full(len(group), -1)
+        mat_image, mat_objects, mat_uv, no_image = {}, {}, {}, set()
+        for g in np.unique(group):
+            label, mat_name = report.groups[int(g)]
+            imgs = np.unique(image[group == g])
+            with_img = imgs[imgs >= 0]
+            if len(with_img) and mat_name:
+                mat_image.setdefault(mat_name, int(with_img[0]))
+                mat_objects.setdefault(mat_name, set()).add(report.sources.get(label, label))
+                mat_uv.setdefault(mat_name, set()).add(report.uv_maps.get((label, mat_name), ""))
+            if np.any(imgs < 0) and scene_data.lamp is not None and \
+                    np.any((image < 0) & (group == g) & (np.asarray(scene_data.lamp) < 0)
+                           & ~scene_data.virtual):
+                no_image.add((label, mat_name))
+        for label, mat_name in sorted(no_image):
+            warnings.append(f"'{label}' / material '{mat_name or '(none)'}': faces without an "
+                            "image texture are left unchanged")
 
-    # Library (read-only) objects keep their materials: no relit copy, no maps for them.
-    for mat_name in list(mat_objects):
-        keep = set()
-        for obj_name in sorted(mat_objects[mat_name]):
-            obj = bpy.data.objects.get(obj_name)
-            if obj is not None and not materials.slots_editable(obj):
-                warnings.append(f"'{obj_name}' is linked from a library (read-only): its "
-                                "material is left as is; it still casts shadows")
+        # Library (read-only) objects keep their materials: no relit copy, no maps for them.
+        for mat_name in list(mat_objects):
+            keep = set()
+            for obj_name in sorted(mat_objects[mat_name]):
+                obj = bpy.data.objects.get(obj_name)
+                if obj is not None and not materials.slots_editable(obj):
+                    warnings.append(f"'{obj_name}' is linked from a library (read-only): its "
+                                    "material is left as is; it still casts shadows")
+                    continue
+                keep.add(obj_name)
+            if keep:
+                mat_objects[mat_name] = keep
+            else:
+                del mat_objects[mat_name]
+                mat_image.pop(mat_name, None)
+        used_images = set(mat_image.values())
+
+        textures = solution.texture if solution.options.mode != "none" else {}
+        warnings.extend(_overlap_warnings(scene_data, solution.texel_map))
+
+        # Images, one per (used image, lamp).
+        made_images, t_images = {}, {}
+        with MapWriter(key, reuse=old) as writer:
+            for i, m in solution.maps.items():
+                if i not in used_images:
+                    continue
+                src = scene_data.images[i].name
+                direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
+                made_images[i] = []
+                for j, lamp in enumerate(lamps):
+                    img = writer.write(f"{src}.relight.{lamp.label}", m[j],
+                                       None if direct is None else direct[j])
+                    img[ids.MAP_SOURCE], img[ids.MAP_LAMP] = src, lamp.label
+                    made_images[i].append(img)
+                if i in textures:
+                    t_images[i] = writer.write(f"{src}.relight.T", textures[i])
+            for stale in writer.reuse.values():          # old maps nobody writes again
+                bpy.data.images.remove(stale)
+        if writer.full_float:
+            warnings.append(f"{len(writer.full_float)} image(s) hold values above 65504 (photos in "
+                            f"absolute units?): written as 32-bit float, not clipped "
+                            f"('{writer.full_float[0]}'...)")
+        if writer.non_finite:
+            warnings.append(f"{len(writer.non_finite)} image(s) had NaN or infinite values, written "
+                            f"as 0 ('{writer.non_finite[0]}'...): please report it")
+
+        # Relit materials.
+        relit = {}
+        for mat_name, i in mat_image.items():
+            orig = bpy.data.materials.get(mat_name)
+            if orig is None or i not in made_images:
                 continue
-            keep.add(obj_name)
-        if keep:
-            mat_objects[mat_name] = keep
-        else:
-            del mat_objects[mat_name]
-            mat_image.pop(mat_name, None)
-    used_images = set(mat_image.values())
+            uv_maps = {u for u in mat_uv.get(mat_name, ()) if u}
+            if len(uv_maps) > 1:
+                warnings.append(f"Material '{mat_name}' is read through different UV maps on "
+                                f"different objects ({', '.join(sorted(uv_maps))}): its relit copy "
+                                "keeps the material's own UV Map node")
+            relit[mat_name] = _relit_material(orig, scene_data.images[i].name, made_images[i], lamps,
+                                              key, t_images.get(i),
+                                              next(iter(uv_maps)) if len(uv_maps) == 1 else None)
 
-    textures = solution.texture if solution.options.mode != "none" else {}
-    warnings.extend(_overlap_warnings(scene_data, solution.texel_map))
-
-    # Images, one per (used image, lamp).
-    made_images, t_images = {}, {}
-    with MapWriter(key, reuse=old) as writer:
-        for i, m in solution.maps.items():
-            if i not in used_images:
+        # Assign.
+        objects, assigned = set(), 0
+        for mat_name, names in mat_objects.items():
+            if mat_name not in relit:
                 continue
-            src = scene_data.images[i].name
-            direct = solution.direct.get(i) if getattr(solution, "direct", None) else None
-            made_images[i] = []
-            for j, lamp in enumerate(lamps):
-                img = writer.write(f"{src}.relight.{lamp.label}", m[j],
-                                   None if direct is None else direct[j])
-                img[ids.MAP_SOURCE], img[ids.MAP_LAMP] = src, lamp.label
-                made_images[i].append(img)
-            if i in textures:
-                t_images[i] = writer.write(f"{src}.relight.T", textures[i])
-        for stale in writer.reuse.values():          # old maps nobody writes again
-            bpy.data.images.remove(stale)
-    if writer.full_float:
-        warnings.append(f"{len(writer.full_float)} image(s) hold values above 65504 (photos in "
-                        f"absolute units?): written as 32-bit float, not clipped "
-                        f"('{writer.full_float[0]}'...)")
-    if writer.non_finite:
-        warnings.append(f"{len(writer.non_finite)} image(s) had NaN or infinite values, written "
-                        f"as 0 ('{writer.non_finite[0]}'...): please report it")
-
-    # Relit materials.
-    relit = {}
-    for mat_name, i in mat_image.items():
-        orig = bpy.data.materials.get(mat_name)
-        if orig is None or i not in made_images:
-            continue
-        uv_maps = {u for u in mat_uv.get(mat_name, ()) if u}
-        if len(uv_maps) > 1:
-            warnings.append(f"Material '{mat_name}' is read through different UV maps on "
-                            f"different objects ({', '.join(sorted(uv_maps))}): its relit copy "
-                            "keeps the material's own UV Map node")
-        relit[mat_name] = _relit_material(orig, scene_data.images[i].name, made_images[i], lamps,
-                                          key, t_images.get(i),
-                                          next(iter(uv_maps)) if len(uv_maps) == 1 else None)
-
-    # Assign.
-    objects, assigned = set(), 0
-    for mat_name, names in mat_objects.items():
-        if mat_name not in relit:
-            continue
-        for obj_name in names:
-            obj = bpy.data.objects.get(obj_name)
-            if obj is not None:
-                objects.add(obj)
-    others = [s for s in bpy.data.scenes if s != scene]
-    for obj in sorted(objects, key=lambda o: o.name):
-        for i, slot in enumerate(obj.material_slots):
-            shown = slot.material
-            orig = materials.original_material(shown)
-            if orig is None or orig.name not in relit:
-                continue
-            if shown is not None and ids.is_generated(shown) and not ids.ours(shown, key):
-                sharing = [s.name for s in others if ids.ours(shown, ids.scene_key(s))]
-                warnings.append(f"'{obj.name}' is also in scene "
-                                f"'{sharing[0] if sharing else '?'}': it now shows this "
-                                "scene's relit material (Update there shows that scene's)")
-                shown.use_fake_user = True          # that scene's, kept for it
-            materials.assign(obj, i, relit[orig.name], key)
-            assigned += 1
-    report.warnings.extend(w for w in warnings if w not in report.warnings)
-    return {"images": sum(len(v) for v in made_images.values()) + len(t_images),
-            "materials": len(relit),
-            "objects": len(objects), "slots": assigned, "lamps": len(lamps),
-            "warnings": warnings}
+            for obj_name in names:
+                obj = bpy.data.objects.get(obj_name)
+                if obj is not None:
+                    objects.add(obj)
+        others = [s for s in bpy.data.scenes if s != scene]
+        for obj in sorted(objects, key=lambda o: o.name):
+            for i, slot in enumerate(obj.material_slots):
+                shown = slot.material
+                orig = materials.original_material(shown)
+                if orig is None or orig.name not in relit:
+                    continue
+                if shown is not None and ids.is_generated(shown) and not ids.ours(shown, key):
+                    sharing = [s.name for s in others if ids.ours(shown, ids.scene_key(s))]
+                    warnings.append(f"'{obj.name}' is also in scene "
+                                    f"'{sharing[0] if sharing else '?'}': it now shows this "
+                                    "scene's relit material (Update there shows that scene's)")
+                    shown.use_fake_user = True          # that scene's, kept for it
+                materials.assign(obj, i, relit[orig.name], key)
+                assigned += 1
+        report.warnings.extend(w for w in warnings if w not in report.warnings)
+        return {"images": sum(len(v) for v in made_images.values()) + len(t_images),
+                "materials": len(relit),
+                "objects": len(objects), "slots": assigned, "lamps": len(lamps),
+                "warnings": warnings}
+    finally:
+        for m in replaced:
+            bpy.data.materials.remove(m)
