@@ -177,14 +177,12 @@ def test_mirror_ball_environment(tmp_path, bridge):
 
 
 @pytest.mark.slow
-def test_posed_frames_environment(tmp_path, bridge):
-    """Six 90-degree renders from the origin, each a camera of the scene with its render as
-    background image: the environment they see against the HDRI."""
-    frames = sc.cube_frames()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def _posed_cube_frames(tmp_path, bridge):
+    """Six 90-degree renders from the origin (sc.cube_frames), each a camera of the scene with
+    its render as background image."""
     scene = bpy.context.scene
     scene.render.resolution_x = scene.render.resolution_y = 128
-    for i, (K, M, img) in enumerate(frames):
+    for i, (K, M, img) in enumerate(sc.cube_frames()):
         cam = bpy.data.objects.new(f"Cam{i}", bpy.data.cameras.new(f"Cam{i}"))
         scene.collection.objects.link(cam)
         cam.data.lens, cam.data.sensor_width = 18.0, 36.0
@@ -192,6 +190,13 @@ def test_posed_frames_environment(tmp_path, bridge):
         path = str(tmp_path / f"frame{i}.exr")
         bridge.write_exr(path, img)
         bridge.set_camera_photo(cam, path)
+
+
+def test_posed_frames_environment(tmp_path, bridge):
+    """Six 90-degree renders from the origin, each a camera of the scene with its render as
+    background image: the environment they see against the HDRI."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    _posed_cube_frames(tmp_path, bridge)
     out = tmp_path / "env.exr"
     bpy.ops.relight.merge_hdr(output=str(out), environment="FRAMES", width=256)
     env = bridge.read_float_image(str(out))
@@ -209,15 +214,7 @@ def test_merge_hdr_cancelled_midway_changes_nothing(tmp_path, radiance, bridge, 
     scene = bpy.context.scene
     folder = str(tmp_path)
     if environment == "FRAMES":
-        scene.render.resolution_x = scene.render.resolution_y = 128
-        for i, (K, M, img) in enumerate(sc.cube_frames()):
-            cam = bpy.data.objects.new(f"Cam{i}", bpy.data.cameras.new(f"Cam{i}"))
-            scene.collection.objects.link(cam)
-            cam.data.lens, cam.data.sensor_width = 18.0, 36.0
-            bridge.set_matrix_world(cam, M)
-            path = str(tmp_path / f"frame{i}.exr")
-            bridge.write_exr(path, img)
-            bridge.set_camera_photo(cam, path)
+        _posed_cube_frames(tmp_path, bridge)
     else:
         folder = _write_brackets(tmp_path / "brackets", sc.brackets(radiance, TIMES), TIMES,
                                  exif_for=(1, 4))
