@@ -176,13 +176,14 @@ def test_mirror_ball_environment(tmp_path, bridge):
     assert any(n.bl_idname == "ShaderNodeTexEnvironment" and n.image is not None for n in nodes)
 
 
-@pytest.mark.slow
 def _posed_cube_frames(tmp_path, bridge):
-    """Six 90-degree renders from the origin (sc.cube_frames), each a camera of the scene with
-    its render as background image."""
+    """A factory-empty file whose cameras are six 90-degree renders from the origin
+    (sc.cube_frames, which renders them first), each with its render as background image."""
+    frames = sc.cube_frames()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.resolution_x = scene.render.resolution_y = 128
-    for i, (K, M, img) in enumerate(sc.cube_frames()):
+    for i, (K, M, img) in enumerate(frames):
         cam = bpy.data.objects.new(f"Cam{i}", bpy.data.cameras.new(f"Cam{i}"))
         scene.collection.objects.link(cam)
         cam.data.lens, cam.data.sensor_width = 18.0, 36.0
@@ -192,10 +193,10 @@ def _posed_cube_frames(tmp_path, bridge):
         bridge.set_camera_photo(cam, path)
 
 
+@pytest.mark.slow
 def test_posed_frames_environment(tmp_path, bridge):
     """Six 90-degree renders from the origin, each a camera of the scene with its render as
     background image: the environment they see against the HDRI."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
     _posed_cube_frames(tmp_path, bridge)
     out = tmp_path / "env.exr"
     bpy.ops.relight.merge_hdr(output=str(out), environment="FRAMES", width=256)
@@ -210,14 +211,14 @@ def test_merge_hdr_cancelled_midway_changes_nothing(tmp_path, radiance, bridge, 
     (an equirect): no EXR, the World untouched; the job run to its end writes it."""
     import importlib
     from helpers.blender import run_cancelled_at
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
     folder = str(tmp_path)
     if environment == "FRAMES":
         _posed_cube_frames(tmp_path, bridge)
     else:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
         folder = _write_brackets(tmp_path / "brackets", sc.brackets(radiance, TIMES), TIMES,
                                  exif_for=(1, 4))
+    scene = bpy.context.scene
     ops = importlib.import_module("relight_ext.operators.capture")
     precompute = importlib.import_module("relight_ext.operators.precompute")
     out = tmp_path / "out.exr"
