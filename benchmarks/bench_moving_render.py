@@ -189,21 +189,18 @@ def build(args, tmp):
             sn.sync(scene, settle_shadows=False, cull=False)
             save(f"nocull{n}")
             sn.sync(scene, settle_shadows=False)
-        if n in getattr(args, "rays", ()):
-            scene.relight.cycles_shadows = "RAYS"
+        # Cycles' rays (bench_ray_shadow), EEVEE's shadow maps (bench_eevee_shadow): the
+        # setting switched for one Update and one file, then back to the spheres
+        for tag, setting, value in (("rays", "cycles_shadows", "RAYS"),
+                                    ("maps", "eevee_shadows", "MAPS")):
+            if n not in getattr(args, tag, ()):
+                continue
+            setattr(scene.relight, setting, value)
             t0 = time.perf_counter()
             assert bpy.ops.relight.update() == {"FINISHED"}
-            info_out.setdefault("rays", {})[n] = time.perf_counter() - t0
-            save(f"rays{n}")
-            scene.relight.cycles_shadows = "SPHERES"
-            assert bpy.ops.relight.update() == {"FINISHED"}
-        if n in getattr(args, "maps", ()):
-            scene.relight.eevee_shadows = "MAPS"
-            t0 = time.perf_counter()
-            assert bpy.ops.relight.update() == {"FINISHED"}
-            info_out.setdefault("maps", {})[n] = time.perf_counter() - t0
-            save(f"maps{n}")
-            scene.relight.eevee_shadows = "SPHERES"
+            info_out.setdefault(tag, {})[n] = time.perf_counter() - t0
+            save(f"{tag}{n}")
+            setattr(scene.relight, setting, "SPHERES")
             assert bpy.ops.relight.update() == {"FINISHED"}
     return paths, info_out
 

@@ -567,6 +567,20 @@ def _probes_off():
         es.show(scene, key, True)
 
 
+@contextlib.contextmanager
+def _lamp_a_alone():
+    """Lamp B at 0 W (the truths below are of lamp A's light), its power back afterwards."""
+    light = bpy.data.lights["LampB"]
+    energy = light.energy
+    light.energy = 0.0
+    bpy.context.view_layer.update()
+    try:
+        yield
+    finally:
+        light.energy = energy
+        bpy.context.view_layer.update()
+
+
 def _direct_bake(obj, samples=256):
     """Cycles' direct diffuse light on ``obj`` (white diffuse), per texel of its photo's size,
     from the lamps alone (the relit surfaces, which emit, are made plain diffuse meanwhile)."""
@@ -631,15 +645,11 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     assert settled is not None and list(settled[sn.SETTLED_KEY])[:2] == ["LampA", "LampB"]
     v_settled = _pixels_rgba(settled)[..., 0]
     # Cycles truth: lamp A alone, Suzanne hidden from the render or not
-    energy_b = bpy.data.lights["LampB"].energy
-    bpy.data.lights["LampB"].energy = 0.0
-    try:
+    with _lamp_a_alone():
         with_obj = _direct_bake(floor)
         monkey.hide_render = True
         without = _direct_bake(floor)
         monkey.hide_render = False
-    finally:
-        bpy.data.lights["LampB"].energy = energy_b
     lit = without > 0.05 * without.max()
     v_true = np.where(lit, with_obj / np.maximum(without, 1e-9), 1.0)
     # the spheres' V at the texel centres (the numpy twin)
@@ -680,9 +690,7 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
     assert not missed.any() and mask.mean() < 0.6
     # the material takes the settled V while Suzanne stays (lamp A alone: the EMIT bake with
     # and without the shadow factor gives 1 - a (1 - V)), the spheres' once it moves
-    bpy.data.lights["LampB"].energy = 0.0
-    bpy.context.view_layer.update()
-    try:
+    with _lamp_a_alone():
         shadowed = _bake(floor, mat)[..., 0]
         plain = _unshadowed_bake(floor, mat)
         a = _bake(floor, _alpha_material(mat.node_tree.nodes["M LampA"].image))[..., 0]
@@ -692,9 +700,6 @@ def test_settled_shadows_are_the_real_mesh_s_and_give_way_when_it_moves():
             tex.image = settled
             return tex.outputs["Color"]
         v_shaded = _bake(floor, _emit_material("settled_colour", colour))[..., 0]   # lamp A
-    finally:
-        bpy.data.lights["LampB"].energy = energy_b
-        bpy.context.view_layer.update()
     on = plain > 1e-4
     assert np.abs(shadowed[on] / plain[on] - (1 - a * (1 - v_shaded))[on]).max() < 2e-3
     assert (v_shaded < 0.5).sum() >= 5
@@ -851,10 +856,7 @@ def test_cycles_rays_give_the_real_mesh_s_moving_shadow(tmp_path):
     assert all(fc.driver.is_simple_expression for fc in ray.animation_data.drivers)
     monkey.location = (-0.6, -0.3, 0.8)                # moved: no Update
     bpy.context.view_layer.update()
-    energy_b = bpy.data.lights["LampB"].energy
-    bpy.data.lights["LampB"].energy = 0.0
-    bpy.context.view_layer.update()
-    try:
+    with _lamp_a_alone():
         with_obj = _direct_bake(floor)
         monkey.hide_render = True
         without = _direct_bake(floor)
@@ -868,9 +870,6 @@ def test_cycles_rays_give_the_real_mesh_s_moving_shadow(tmp_path):
         bpy.context.view_layer.update()
         a = _bake(floor, _alpha_material(mat.node_tree.nodes["M LampA"].image), 16)[..., 0]
         P = _bake(floor, _position_material(), 16)[..., :3].reshape(-1, 3)
-    finally:
-        bpy.data.lights["LampB"].energy = energy_b
-        bpy.context.view_layer.update()
     want, got, spheres, lit, shadow, far = _scores(monkey, with_obj, without, shadowed, plain,
                                                    a, P)
     err_rays = np.abs(got - want)[shadow].mean()
@@ -984,10 +983,7 @@ def test_eevee_shadow_maps_give_the_real_mesh_s_moving_shadow(tmp_path):
     _camera_over_floor(32)
     scene.render.engine = EEVEE_ENGINE
     scene.eevee.taa_render_samples = 16
-    energy_b = bpy.data.lights["LampB"].energy
-    bpy.data.lights["LampB"].energy = 0.0
-    bpy.context.view_layer.update()
-    try:
+    with _lamp_a_alone():
         with_obj = _direct_render(tmp_path, "with")
         monkey.hide_render = True
         without = _direct_render(tmp_path, "without")
@@ -1010,9 +1006,6 @@ def test_eevee_shadow_maps_give_the_real_mesh_s_moving_shadow(tmp_path):
         floor.material_slots[0].material = _position_material()
         P = _render_rgb("position", tmp_path).reshape(-1, 3)
         floor.material_slots[0].material = mat
-    finally:
-        bpy.data.lights["LampB"].energy = energy_b
-        bpy.context.view_layer.update()
     want, got, spheres, lit, shadow, far = _scores(monkey, with_obj, without, shadowed, plain,
                                                    a, P)
     err_maps = np.abs(got - want)[shadow].mean()

@@ -127,7 +127,7 @@ def _source(group) -> str:
     return repr((drivers, consts, sun, lamp.name if lamp else ""))
 
 
-def _make_probe(name, group, slot, shadowed, key, coll, recv, block):
+def _make_probe(name, group, slot, shadowed, key, coll, recv, block, source):
     lamp = _lamp_object(group)
     sun = lamp is not None and lamp.type == "LIGHT" and lamp.data.type == "SUN"
     label = f"{PREFIX} {name} {slot} {'shadowed' if shadowed else 'free'}"
@@ -148,7 +148,7 @@ def _make_probe(name, group, slot, shadowed, key, coll, recv, block):
     obj = bpy.data.objects.new(label, data)
     ids.tag(obj, key)
     obj[PROBE_KEY] = {"lamp": name, "slot": slot, "shadowed": int(shadowed)}
-    obj[SOURCE_KEY] = _source(group)
+    obj[SOURCE_KEY] = source
     obj.visible_camera = False          # Cycles would show a point light's sphere
     obj.hide_select = True
     coll.objects.link(obj)
@@ -199,15 +199,17 @@ def sync(scene, key, lamp_groups, names, recv, blockers) -> dict:
     _members(rc, recv)
     _members(bc, blockers)
     coll = _collection(key, "probes", scene)
+    sources = {name: _source(lamp_groups[name]) for name in slots}
     for k, obj in list(have.items()):
         name, slot, _ = k
-        if slots.get(name) != slot or obj.get(SOURCE_KEY) != _source(lamp_groups[name]):
+        if slots.get(name) != slot or obj.get(SOURCE_KEY) != sources[name]:
             _remove(obj)
             del have[k]
     for name, slot in slots.items():
         for shadowed in (1, 0):
             if (name, slot, shadowed) not in have:
-                _make_probe(name, lamp_groups[name], slot, shadowed, key, coll, rc, bc)
+                _make_probe(name, lamp_groups[name], slot, shadowed, key, coll, rc, bc,
+                            sources[name])
     reach = _reach(recv, lamp_groups.values())
     for obj in probes(key).values():
         if obj.data.type != "SUN":
