@@ -186,6 +186,24 @@ def clutter_furnace(rho=0.9, touching=False) -> SceneData:
     return SceneData(np.concatenate(parts), rho, 1.0, 0, ["all"])
 
 
+def hover_furnace(rho=0.9) -> SceneData:
+    """The closed 1 m furnace of clutter_furnace (every face emits 1 and reflects ``rho``:
+    1 / (1 - rho) everywhere) holding what hovers just off a face (issue 47): pairs of boxes of
+    1, 2, 5 and 10 cm, 1 mm above the floor and 1 mm apart; three thin panels 1 mm apart; a
+    5 cm box 1 mm off a wall.  The room's 6 faces come first."""
+    parts = [flip(quads_from_boxes([0.5, 0.5, 0.5], [1, 1, 1]))]
+    x = 0.1
+    for size in (0.01, 0.02, 0.05, 0.1):
+        for _ in range(2):
+            parts.append(quads_from_boxes([x + size / 2, 0.3, 0.001 + size / 2], [size] * 3))
+            x += size + 0.001
+        x += 0.05
+    for k in range(3):
+        parts.append(quads_from_boxes([0.5, 0.7 + 0.003 * k, 0.4], [0.3, 0.002, 0.3]))
+    parts.append(quads_from_boxes([0.974, 0.5, 0.6], [0.05, 0.05, 0.05]))
+    return SceneData(np.concatenate(parts), rho, 1.0, 0, ["all"])
+
+
 def blinds_room(slats=6, gap=0.01) -> SceneData:
     """A closed 1 m room (rho 0.7) lit by a square lamp under its ceiling, with venetian blinds
     in the middle: ``slats`` single quads 40 cm square, ``gap`` apart, slightly tilted, each

@@ -448,6 +448,9 @@ def _initial_links(scene, q: Quality, occluder, rng) -> _Start:
         else None
     if q.contact_levels > 0:
         split_at_contacts(h, *contacts, min_area / 4 ** q.contact_levels)
+    if q.gap_levels > 0:
+        split_at_contacts(h, *contact_segments(scene, scale, gaps=True),
+                          min_area / 4 ** q.gap_levels)
     rho_max = scene.rho.max(axis=1)
     e_max = scene.emission.max(axis=1)
     receives = rho_max > 0

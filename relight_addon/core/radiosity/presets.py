@@ -32,6 +32,10 @@ class Quality:
     # elements crossed by a contact line (radiosity.contacts) split this many levels below
     # min_area: an object standing on a face darkens part of the leaves under its foot
     contact_levels: int = 0
+    # the same where an object hovers just above a face (radiosity.contacts' gap lines): one
+    # gather point on an element across its outline sees either the object's underside or the
+    # room
+    gap_levels: int = 0
     # a near leaf's unoccluded form factors averaged over this many m x m Gauss points when more
     # than ``quadrature`` (radiosity.final_links): one point errs by 20 % on a leaf as large as
     # its gap to the source, and form factors cost no rays
@@ -62,7 +66,8 @@ class Quality:
 PRESETS = {
     "draft": Quality("draft", eps_bf=0.01, eps_bfv=0.005, min_area=2e-3, quadrature=1, rays=8,
                      oracle_rays=8, passes=2, separation=0.4, exitance_bias=0.10,
-                     proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3),
+                     proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3,
+                     gap_levels=2),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
                       split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3,

@@ -283,14 +283,14 @@ def _initialise(run: _Run, reuse):
         solve_basis(sol, scene1.rho[sol.system.patch])    # scene exitances, eq 4.1 reflectances
     else:
         stage(0.05, "Solving the light in the room", 0.4)
-        # A decimated proxy has no contact lines to split at (radiosity.contacts): its
+        # A decimated proxy has no contact or gap lines to split at (radiosity.contacts): its
         # triangles lying on one another are the decimation's, not objects standing on a
         # surface.  With them, family room 5's 100k-triangle scan at medium pinned a lamp 15 %
         # off at exact powers (lamp off 0.51 / 0.55 -> 0.75 / 0.63 CIEDE2000).
         quality = get_preset(opt.preset)
         lamp_view = {}
         if proxy is not None:
-            quality = quality.with_(contact_levels=0)
+            quality = quality.with_(contact_levels=0, gap_levels=0)
             lamp_view = proxy_lamp_view(proxy, run.occluder)
         with scope(0.05, 0.4):
             sol = solve_radiosity(scene1, quality, occluder=run.rad_occluder, seed=opt.seed,
