@@ -41,6 +41,7 @@ PYTEST_JOBS ?= -n 2 --dist loadfile --no-loadscope-reorder
 LTS_TESTS ?= tests/test_extension_install.py tests/test_bridge_read.py \
 	tests/test_precompute_operator.py tests/test_user_edits.py tests/test_virtual_lamps.py \
 	tests/test_virtual_objects.py tests/test_virtual_emissive.py tests/test_sphere_nodes.py \
+	tests/test_id_arrays.py \
 	tests/test_eevee_light.py tests/test_ar_refused.py \
 	tests/test_capture_operators.py tests/test_messages.py tests/test_progress.py \
 	tests/test_data_safety.py

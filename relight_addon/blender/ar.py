@@ -118,7 +118,7 @@ class ARJob:
 
 
 def _group_fit(ng):
-    a = np.asarray(ng.get("relight_ar_spheres", []), float).reshape(-1, 4)
+    a = ids.array(ng.get("relight_ar_spheres", [])).reshape(-1, 4)
     h = list(ng.get("relight_ar_hull", [0, 0, 0, 0]))
     return (a[:, :3], a[:, 3], (np.asarray(h[:3], float), float(h[3])),
             ng.get(ar_nodes.FIT_KEY, ""))

@@ -70,7 +70,7 @@ def object_spheres(obj, group):
     """(centres (m, 3), radii (m,), hull (centre, radius)) of ``obj``'s fitted spheres in world
     space now, as its shadow group's drivers place them (the matrix's rotation and location,
     the radii times the mean scale)."""
-    a = np.asarray(group.get("relight_ar_spheres", []), float).reshape(-1, 4)
+    a = ids.array(group.get("relight_ar_spheres", [])).reshape(-1, 4)
     h = np.asarray(list(group.get("relight_ar_hull", [0, 0, 0, 0])), float)
     m = np.array(obj.matrix_world, float)
     scale = float(np.mean(obj.matrix_world.to_scale()))
@@ -87,8 +87,8 @@ def frame_data(scene):
     key = ids.scene_key(scene)
     if st is None or key is None:
         return []
-    lights = [(np.asarray(r["direction"], float), float(r["half_angle"]),
-               np.asarray(r["radiance"], float)) for r in st.get("lights", [])]
+    lights = [(ids.array(r["direction"]), float(r["half_angle"]),
+               ids.array(r["radiance"])) for r in st.get("lights", [])]
     out = []
     for name, group in sorted(ar_nodes.shadow_groups(key).items()):
         obj = scene.objects.get(name)

@@ -272,9 +272,9 @@ def light_terms(records):
     from ..core.ar.main_light import MainLight
     out = []
     for r in records:
-        lt = MainLight(np.asarray(r["direction"], float), r["solid_angle"], r["half_angle"],
-                       np.asarray(r["radiance"], float), np.zeros(3), r["share"], 1)
+        lt = MainLight(ids.array(r["direction"]), r["solid_angle"], r["half_angle"],
+                       ids.array(r["radiance"]), np.zeros(3), r["share"], 1)
         d, angle, cap = ar_nodes.light_constants(lt)
-        out.append((d, angle, cap, np.asarray(r["radiance"], float),
+        out.append((d, angle, cap, ids.array(r["radiance"]),
                     float(cone_sin2(r["half_angle"]))))
     return out

@@ -10,6 +10,7 @@ from __future__ import annotations
 import uuid
 
 import bpy
+import numpy as np
 
 # -- on datablocks Relight made -----------------------------------------------------------------
 GENERATED = "relight_generated"
@@ -41,6 +42,15 @@ SPHERES = "relight_spheres"          # on virtual objects: how many spheres
 # -- on map images ------------------------------------------------------------------------------
 MAP_SOURCE = "relight_map_source"    # the photo's name (names may be renamed)
 MAP_LAMP = "relight_map_lamp"        # its lamp's label
+
+
+def array(value, dtype=float) -> np.ndarray:
+    """A copy of an ID property's array (or of any sequence).  ``np.asarray`` of an ID
+    property array shares its memory (the buffer protocol), which Blender frees when the
+    property is set again or its ID removed: an AR Update that re-made the first object's
+    shadow group read that object's spheres from the old group's freed memory, and the next
+    render's shadow changed from run to run (zeros on Blender 5.2)."""
+    return np.array(value, dtype=dtype, copy=True)
 
 
 def is_generated(idb) -> bool:

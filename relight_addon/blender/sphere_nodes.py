@@ -399,14 +399,14 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
 
 def group_bound(ng):
     """(centre, radius) of the bounding sphere a sphere group tests its Reach with."""
-    a = np.asarray(ng[BOUND_KEY], float)
+    a = ids.array(ng[BOUND_KEY])
     return a[:3], float(a[3])
 
 
 def group_spheres(ng):
     """(centres (m, 3), radii (m,), hull (centre, radius) or None) stored on a sphere group, in
     its object's frame."""
-    a = np.asarray(ng.get(SPHERES_KEY, []), float).reshape(-1, 4)
+    a = ids.array(ng.get(SPHERES_KEY, [])).reshape(-1, 4)
     h = ng.get(HULL_KEY)
     hull = None if h is None else (np.asarray(h[:3], float), float(h[3]))
     return a[:, :3], a[:, 3], hull
