@@ -67,7 +67,7 @@ PRESETS = {
     "draft": Quality("draft", eps_bf=0.01, eps_bfv=0.005, min_area=2e-3, quadrature=1, rays=8,
                      oracle_rays=8, passes=2, separation=0.4, exitance_bias=0.10,
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3,
-                     gap_levels=2),
+                     gap_levels=2, partial_rays=32),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
                       split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3,
