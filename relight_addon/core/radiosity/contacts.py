@@ -11,10 +11,11 @@ to ``Quality.contact_levels`` below the preset's smallest element, so that what 
 small (discontinuity meshing of the zeroth order, by quadtree splits).
 
 Gap lines: the same edges where the object does not touch but hovers within GAP_TOL of the
-face (a box 1 mm above the floor, a cabinet 1 mm off a wall).  The face under it is lit by the
-object's underside and barely by the room, and an element across the outline gathers both at
-one point at draft: in a closed furnace with boxes of 1-10 cm 1 mm above the floor, draft's
-worst face was 41 % off at rho 0.9 (5 % at 0.5).  Draft splits there (Quality.gap_levels).
+face (a box 1 mm above the floor, a cabinet 1 mm off a wall).  The face under it sees the
+object's underside and little of the room, and an element across the outline that gathers at
+one point (draft) takes either view for the whole element, while its exact entries are averaged
+over it: no row conservation mends that (a furnace with boxes 1 mm above the floor:
+benchmarks/results/furnace.md).  Draft splits there (Quality.gap_levels).
 """
 from __future__ import annotations
 
