@@ -146,7 +146,7 @@ def main():
               "draft as it was.  Draft now splits the elements that the outlines of what hovers "
               "within 1e-3 of the scene's size cross, 2 levels below its smallest element "
               "(core/radiosity/contacts.py's gap lines, Quality.gap_levels); medium and high, "
-              "whose elements are small enough there, split none."
+              "whose elements are small enough there, split none.",
               "", f"Load average at the end of the run: {load:.1f} (2 cores)."]
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "furnace.md").write_text("\n".join(lines) + "\n")

@@ -117,7 +117,7 @@ def test_chain_move_add_update_save_reopen():
     fresh process, render.  On Blender 5.2 the second render's shadow varied from run to run
     (3.6-8.6 CIEDE2000 against the bound 4.0): Update re-made the first object's shadow group
     from spheres read out of the old group's ID property, whose memory np.asarray shared and
-    Blender freed (ids.array copies).  test_ar_update_reads_no_freed_memory checks that alone."""
+    Blender freed (ids.array copies).  tests/test_id_arrays.py checks that alone."""
     hdri, photo, _ = _inputs()
     moved_centre = (DEFAULT_CENTRE + MOVE).tolist()
     first = {"radius": 0.3, "centre": moved_centre}

@@ -85,8 +85,6 @@ def test_a_box_standing_on_the_floor_keeps_the_furnace_exact(preset, contact_lev
         assert worst[1] < straddling
 
 
-
-
 @pytest.mark.parametrize("preset", ["medium", "high"])
 def test_medium_and_high_keep_a_furnace_with_hovering_clutter_exact(preset):
     """hover_furnace (boxes 1 mm above the floor and apart, thin panels, a box 1 mm off a wall;
