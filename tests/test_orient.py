@@ -87,3 +87,28 @@ def test_faces_looked_at_in_chunks_decide_as_at_once(monkeypatch):
     lit7, camera7, _, _ = orient_module.side_evidence(sc, occ, faces)
     assert np.array_equal(camera7, camera)
     np.testing.assert_allclose(lit7, lit, rtol=0.25, atol=1e-3 * lit.max())
+
+
+def test_a_box_standing_inside_out_on_the_floor_is_turned_whole_on_every_seed():
+    """A 0.4 m box modelled inside out, standing on the floor: its bottom lies where the floor
+    is, and the rays from its inside towards the bottom met the floor's coincident face about
+    as often as the bottom.  Two of its sides then had 0.88 of their rays on the box, below
+    the 0.9 the inside-out test asked for, and stayed turned in on some seeds (the relit box at
+    draft read 0.19 for 0.30)."""
+    room = _room()
+    box = flip(quads_from_boxes([2.0, 0.6, 0.2], [0.4, 0.4, 0.4]))          # inward faces
+    n0 = room.n_patches - 2                                               # before the lamps
+    corners = np.concatenate([room.corners[:n0], box, room.corners[n0:]])
+    n = len(corners)
+    lamp = np.concatenate([room.lamp[:n0], np.full(len(box), -1), room.lamp[n0:]])
+    emission = np.concatenate([room.emission[:n0], np.zeros((len(box), 3)), room.emission[n0:]])
+    occluder = lamp < 0
+    group = np.concatenate([np.zeros(n0, np.int32), np.ones(len(box), np.int32),
+                            np.full(2, 2, np.int32)])
+    sc = SceneData(corners, np.where(lamp[:, None] >= 0, 0.0, 0.6), emission, lamp, ["A", "B"],
+                   occluder=occluder, group=group, viewpoint=np.array([0.5, 0.5, 1.5]))
+    occ = sc.make_occluder()          # knows each triangle's face: the rays' objects
+    for seed in range(6):
+        o = orient(sc, occ, seed=seed)
+        assert o.flipped[n0:n0 + len(box)].all(), (seed, np.flatnonzero(o.flipped))
+        assert not o.flipped[:n0].any(), seed
