@@ -48,13 +48,14 @@ def child(preset: str) -> None:
     from scenes.testscenes import cornell_box
     scene = cornell_box()
     for _ in range(REPEATS):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         sol = solve_radiosity(scene, preset)
         B = sol.patch_radiosity()
         total = time.perf_counter() - t0
+        cpu = time.process_time() - c0
         stats = {k: (float(v) if isinstance(v, (float, np.floating)) else int(v))
                  for k, v in sol.stats().items()}
-        print(json.dumps({"preset": preset, "total": total, "stats": stats,
+        print(json.dumps({"preset": preset, "total": total, "cpu": cpu, "stats": stats,
                           "B": np.asarray(B).tolist()}), flush=True)
 
 
@@ -146,19 +147,19 @@ SEEDS = range(5)
 
 
 def seed_spread(scene, ref, lamp):
-    """{preset: [(seed, links, mean err, max err, seconds)]} over SEEDS, every preset (ultra
-    too: ~1.5 min a solve), in this process."""
+    """{preset: [(seed, links, mean err, max err, seconds, CPU seconds)]} over SEEDS, every
+    preset (ultra too: ~1.5 min a solve), in this process."""
     from relight_addon.core.radiosity.precompute import solve_radiosity
     out = {}
     for preset in PRESETS:
         out[preset] = []
         for seed in SEEDS:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             sol = solve_radiosity(scene, preset, seed=seed)
             B = sol.patch_radiosity()
-            dt = time.perf_counter() - t0
+            dt, cpu = time.perf_counter() - t0, time.process_time() - c0
             mean, worst = errors(B, ref, lamp)
-            out[preset].append((seed, int(sol.stats()["links"]), mean, worst, dt))
+            out[preset].append((seed, int(sol.stats()["links"]), mean, worst, dt, cpu))
             print(f"{preset} seed {seed}: mean {100 * mean:.2f} %, max {100 * worst:.2f} %")
     return out
 
@@ -196,7 +197,7 @@ def write_md(rows, noise_mean, noise_max, raw_rate, spread):
     load = os.getloadavg()
     now = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
     hdr = ["preset", "elements", "leaves", "links", "refine s", "form factors s",
-           "visibility s", "final links s", "solve s", "total s", "mean rel err %",
+           "visibility s", "final links s", "solve s", "total s", "CPU s", "mean rel err %",
            "max rel err %", "rays", "visibility M rays/s"]
     lines = [
         "# Cornell box: quality presets vs Mitsuba 3",
@@ -208,7 +209,8 @@ def write_md(rows, noise_mean, noise_max, raw_rate, spread):
         "is shown. \"refine s\" includes the form factor / visibility time spent in the oracle; "
         "\"form factors s\" and \"visibility s\" are the point-to-polygon and ray-casting time "
         "wherever spent (refine and final links). \"total s\" is wall time of "
-        "`solve_radiosity` + `patch_radiosity()`.",
+        "`solve_radiosity` + `patch_radiosity()`, \"CPU s\" the process's CPU time over the "
+        "same (user + sys, every thread: what issue 47's peer figures are).",
         "",
         "| " + " | ".join(hdr) + " |",
         "|" + "|".join(["---"] + ["---:"] * (len(hdr) - 1)) + "|",
@@ -224,20 +226,22 @@ def write_md(rows, noise_mean, noise_max, raw_rate, spread):
         lines.append("| " + " | ".join([
             name, str(s["elements"]), str(s["leaves"]), str(s["links"]), g("refine"),
             g("form_factors"), g("visibility"), g("final_links"), g("solve"),
-            f"{run['total']:.3f}", f"{100 * r['mean_err']:.3f}", f"{100 * r['max_err']:.3f}",
+            f"{run['total']:.3f}", f"{run.get('cpu', float('nan')):.3f}",
+            f"{100 * r['mean_err']:.3f}", f"{100 * r['max_err']:.3f}",
             str(s.get("rays", 0)),
             f"{s.get('rays', 0) / max(s.get('t_visibility', 0.0), 1e-9) / 1e6:.2f}"]) + " |")
     lines += ["", f"Spread over the random seed (seeds {SEEDS.start}-{SEEDS.stop - 1}, one "
               "process; the oracle's and the final links' rays are random): min - max over the "
               "seeds.", "",
-              "| preset | links | mean rel err % | max rel err % | total s |",
-              "|---|---:|---:|---:|---:|"]
+              "| preset | links | mean rel err % | max rel err % | total s | CPU s |",
+              "|---|---:|---:|---:|---:|---:|"]
     for preset, runs in spread.items():
         col = list(zip(*runs))
         lines.append(f"| {preset} | {min(col[1])} - {max(col[1])} | "
                      f"{100 * min(col[2]):.2f} - {100 * max(col[2]):.2f} | "
                      f"{100 * min(col[3]):.2f} - {100 * max(col[3]):.2f} | "
-                     f"{min(col[4]):.2f} - {max(col[4]):.2f} |")
+                     f"{min(col[4]):.2f} - {max(col[4]):.2f} | "
+                     f"{min(col[5]):.2f} - {max(col[5]):.2f} |")
     lines += ["", "A preset less accurate than the one below it on a seed (mean or max): "
               + (", ".join(worse_than_below(spread)) or "none") + "."]
     lines += [

@@ -603,6 +603,7 @@ def _final_links(h, receiver, source, occluder, q: Quality, rng, scale, spread_l
                                            partial_rays=q.partial_rays,
                                            spread_links=spread_links,
                                            spread_rays=q.spread_rays,
+                                           partial_point_rays=q.partial_point_rays,
                                            fixed=_fixed_origin_leaves(h, contacts, q))
     give_back_memory()          # the form factors' threads' freed arrays (memory.py)
     split_sources(h, gather, q.quadrature, q.split_near, q.split_levels)

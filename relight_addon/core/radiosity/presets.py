@@ -46,6 +46,10 @@ class Quality:
     # rays in all of a final link whose first rays were partly blocked, when more than
     # ``rays``: a shadow's edge crosses it, and its visible fraction is the noisiest
     partial_rays: int = 0
+    # and at least this many a point of such a link (final_links ``partial_point_rays``): a
+    # large element's link gives each of its leaves' points one ray, a penumbra leaf's visible
+    # fraction then one ray's 0 or 1
+    partial_point_rays: int = 1
     # rays a leaf, from spots spread over it, of the near pairs of shadows the refinement could
     # not resolve (precompute._unresolved_shadows): fixed points misjudge a visibility that
     # varies across the leaf
@@ -67,7 +71,8 @@ PRESETS = {
     "draft": Quality("draft", eps_bf=0.01, eps_bfv=0.005, min_area=2e-3, quadrature=1, rays=8,
                      oracle_rays=8, passes=2, separation=0.4, exitance_bias=0.10,
                      proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3,
-                     gap_levels=2, partial_rays=32),
+                     gap_levels=2, partial_rays=32, contact_levels=1,
+                     partial_point_rays=8),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
                       rays=8, oracle_rays=8, passes=2, separation=0.3, confirm_rays=4,
                       split_levels=3, split_near=0.15, contact_levels=2, ff_quadrature=3,
