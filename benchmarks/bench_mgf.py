@@ -16,12 +16,14 @@ quarter circle: 12,463 faces, 12,629 patches, 3 lamps), its faces turned to the 
 light and given backs where both sides are lit (core/relight/orient.py: the slabs' faces point
 into the slabs, so read one-sided the room would see their backs), then solved by
 ``solve_radiosity`` with one radiosity basis per lamp, as the precompute does.  Each preset runs
-in its own process, so that its peak RSS is its own.  The peer's figures are the issue's
-(rpkCpp, Galerkin hierarchical radiosity with clustering, one system for all lamps, one
-thread): 48 s and 0.9 GB for the office's 13,780 faces, 146 s and 0.78 GB for the classroom's
-5,250.
+in its own process, so that its peak RSS is its own.  The peer is rpkCpp (Galerkin hierarchical
+radiosity with clustering, one system for all lamps, one thread).  With ``--peer PATH/rpk`` it
+is run here, on the same file, in the same session (benchmarks/peer.py: its process CPU time
+and peak RSS, the median of ``--peer-runs`` runs of ``--peer-iterations`` iterations), and the
+report says so; without it the report uses ``PEERS``, issue 47's measurement, and says where
+those figures come from.  Our side is the child's process CPU time too ("solve CPU s").
 
-    python benchmarks/bench_mgf.py PATH/office.mgf [--presets draft,medium]
+    python benchmarks/bench_mgf.py PATH/office.mgf [--presets draft,medium] [--peer PATH/rpk]
     python benchmarks/bench_mgf.py PATH/classroom.mgf
     python benchmarks/bench_mgf.py PATH/office.mgf --presets draft,medium,high --seeds 1,2,3,4
 
@@ -44,6 +46,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from bench_cornell import worse_than_below
+from peer import RPK_ITERATIONS, measure_runs, rpk_command, source_line
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -85,10 +88,11 @@ def child(path, preset, seed=0):
     orient_s = time.perf_counter() - t0
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     estimate = estimate_precompute_memory(two, preset, proxy=False) / 2**20
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     sol = solve_radiosity(two, preset, seed=seed)
     B = sol.patch_radiosity()
     solve_s = time.perf_counter() - t0
+    solve_cpu_s = time.process_time() - c0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     area = two.area_normal()[0]
     lum = np.array([0.2126, 0.7152, 0.0722])
@@ -103,6 +107,7 @@ def child(path, preset, seed=0):
         patches_oriented=two.n_patches,
         flipped=int(oriented.flipped.sum()), backs=int(len(oriented.back_of)),
         lamps=len(scene.lamp_names), read_s=read_s, orient_s=orient_s, solve_s=solve_s,
+        solve_cpu_s=solve_cpu_s,
         rss_before_mb=rss_before, peak_mb=peak, estimate_mb=estimate,
         elements=int(sol.hierarchy.n), leaves=int(len(sol.leaves)), links=int(sol.links.n),
         iterations=int(sol.info.iterations), residual=float(sol.info.residual),
@@ -210,9 +215,23 @@ def machine_line():
             f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.")
 
 
-def report(rows, reference=None, scene="office"):
+def peer_figures(scene, measured=None):
+    """(CPU seconds, peak MB, the sentence saying where they come from) of the peer: measured
+    in this run (benchmarks/peer.py's measure_runs) when given, else issue 47's ``PEERS``."""
+    if measured is not None:
+        return measured["cpu_s"], measured["peak_mb"], (
+            f"rpkCpp {measured['cpu_s']:.1f} s of CPU, {measured['peak_mb']:.0f} MB: "
+            + source_line(measured))
+    peer = PEERS[scene]
+    return peer["seconds"], peer["peak_mb"], (
+        f"rpkCpp with its defaults, converged: {peer['faces']:,} patches, "
+        f"{peer['seconds_range']} s of CPU, {peer['peak_mb']:.0f} MB ({PEER_SOURCE})")
+
+
+def report(rows, reference=None, scene="office", measured=None):
     RESULTS.mkdir(parents=True, exist_ok=True)
     peer = PEERS[scene]
+    peer_cpu, peer_mb, peer_source = peer_figures(scene, measured)
     first = rows[0]
     lines = [
         f"# RenderPark's {scene} (MGF), side by side with rpkCpp", "",
@@ -221,21 +240,22 @@ def report(rows, reference=None, scene="office"):
         f"{first['lamps']} lamps); turned to their lit side ({first['flipped']:,} flipped) with "
         f"{first['backs']:,} backs where both sides are lit: {first['patches_oriented']:,} "
         "patches solved, one basis per lamp.  Each preset in its own process; peak RSS "
-        "includes Python, numpy, scipy and Embree (the RSS before the solve is shown).  "
-        f"rpkCpp with its defaults, converged: {peer['faces']:,} patches, "
-        f"{peer['seconds_range']} s of CPU, {peer['peak_mb']:.0f} MB ({PEER_SOURCE}).", "",
-        "| preset | elements | leaves | links | solve s | peak RSS MB | RSS before the solve MB "
+        "includes Python, numpy, scipy and Embree (the RSS before the solve is shown); \"time / "
+        "rpkCpp's\" is process CPU over process CPU.  " f"{peer_source}.", "",
+        "| preset | elements | leaves | links | solve s | solve CPU s | peak RSS MB "
+        "| RSS before the solve MB "
         "| estimate MB | peak / rpkCpp's | time / rpkCpp's | GMRES iterations | residual "
         "| reflected / emitted | max row sum | vs Mitsuba mean % | max % "
         "| near lamps: mean % | max % | bias % |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-        "---:|"]
+        "---:|---:|"]
     for r in rows:
         lines.append(
             f"| {r['preset']} | {r['elements']:,} | {r['leaves']:,} | {r['links']:,} | "
-            f"{r['solve_s']:.1f} | {r['peak_mb']:.0f} | {r['rss_before_mb']:.0f} | "
-            f"{r['estimate_mb']:.0f} | {r['peak_mb'] / peer['peak_mb']:.2f} | "
-            f"{r['solve_s'] / peer['seconds']:.2f} | {r['iterations']} | {r['residual']:.1e} | "
+            f"{r['solve_s']:.1f} | {_cpu(r):.1f} | {r['peak_mb']:.0f} | "
+            f"{r['rss_before_mb']:.0f} | "
+            f"{r['estimate_mb']:.0f} | {r['peak_mb'] / peer_mb:.2f} | "
+            f"{_cpu(r) / peer_cpu:.2f} | {r['iterations']} | {r['residual']:.1e} | "
             f"{r['reflected_over_emitted']:.3f} | {r['rows_max']:.4f} | "
             + (f"{100 * r['ref_mean']:.2f} | {100 * r['ref_max']:.2f} | "
                f"{100 * r['near_mean']:.2f} | {100 * r['near_max']:.2f} | "
@@ -253,6 +273,11 @@ def report(rows, reference=None, scene="office"):
         lines[-3:-3] = [reference, ""]
     (RESULTS / peer["report"]).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def _cpu(row):
+    """A row's solve CPU seconds (rows written before they were kept: wall seconds)."""
+    return row.get("solve_cpu_s", row["solve_s"])
 
 
 def score(path, rows):
@@ -359,6 +384,9 @@ def main():
     ap.add_argument("--seeds", help="comma-separated: the spread over these seeds (see above)")
     ap.add_argument("--no-reference", action="store_true")
     ap.add_argument("--scene", choices=sorted(PEERS), help="default: the file's name")
+    ap.add_argument("--peer", help="rpkCpp's program (build/rpk): run here on the same file")
+    ap.add_argument("--peer-iterations", type=int, default=RPK_ITERATIONS)
+    ap.add_argument("--peer-runs", type=int, default=3)
     args = ap.parse_args()
     if args.child:
         child(args.path, args.child, args.seed)
@@ -372,12 +400,17 @@ def main():
         seed_spread(args.path, scene, args.presets.split(","),
                     [int(x) for x in args.seeds.split(",") if x])
         return
+    measured = None
+    if args.peer:
+        measured = measure_runs(rpk_command(args.peer, args.path, args.peer_iterations),
+                                args.peer_runs)
+        print("peer", measured, flush=True)
     rows = []
     for preset in args.presets.split(","):
         rows.append(run(args.path, preset))
         print(preset, {k: v for k, v in rows[-1].items() if not k.startswith("probe")}, flush=True)
     reference = None if args.no_reference else score(args.path, rows)
-    report(rows, reference, scene)
+    report(rows, reference, scene, measured)
 
 
 if __name__ == "__main__":
