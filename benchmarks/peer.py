@@ -62,21 +62,18 @@ def measure(cmd, timeout=None, cwd=None) -> dict:
     proc = subprocess.Popen([sys.executable, "-I", "-S", "-c", _LAUNCHER, *cmd], cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             start_new_session=True)
+    nan = float("nan")
     try:
         out, _ = proc.communicate(timeout=timeout)
+        code, user, system, maxrss = json.loads(out.strip().splitlines()[-1])
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)          # the launcher and the peer
         proc.communicate()
-        return {"cpu_s": float("nan"), "user_s": float("nan"), "sys_s": float("nan"),
-                "peak_mb": float("nan"), "wall_s": time.perf_counter() - t0,
-                "returncode": -signal.SIGKILL, "command": shlex.join(cmd),
-                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    wall = time.perf_counter() - t0
-    code, user, system, maxrss = json.loads(out.strip().splitlines()[-1])
+        code, user, system, maxrss = -signal.SIGKILL, nan, nan, nan
     # ru_maxrss is in KiB on Linux, in bytes on macOS
     peak = maxrss / (2**20 if sys.platform == "darwin" else 2**10)
     return {"cpu_s": user + system, "user_s": user, "sys_s": system, "peak_mb": peak,
-            "wall_s": wall, "returncode": code, "command": shlex.join(cmd),
+            "wall_s": time.perf_counter() - t0, "returncode": code, "command": shlex.join(cmd),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
 
 

@@ -99,7 +99,6 @@ def test_a_box_standing_inside_out_on_the_floor_is_turned_whole_on_every_seed():
     box = flip(quads_from_boxes([2.0, 0.6, 0.2], [0.4, 0.4, 0.4]))          # inward faces
     n0 = room.n_patches - 2                                               # before the lamps
     corners = np.concatenate([room.corners[:n0], box, room.corners[n0:]])
-    n = len(corners)
     lamp = np.concatenate([room.lamp[:n0], np.full(len(box), -1), room.lamp[n0:]])
     emission = np.concatenate([room.emission[:n0], np.zeros((len(box), 3)), room.emission[n0:]])
     occluder = lamp < 0

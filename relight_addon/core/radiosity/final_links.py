@@ -337,7 +337,8 @@ class _FinalLinks:
         self._cast(c, rays, np.arange(len(c.P)), ray_count, np.zeros(len(c.P), np.int64))
         if self.partial_rays > self.rays or self.partial_point_rays > 1:
             # links whose rays were partly blocked: a shadow's edge crosses them, and their
-            # visible fraction is the noisiest; they take partial_rays rays in all
+            # visible fraction is the noisiest; they take partial_rays rays in all and
+            # partial_point_rays a point at least
             more = (rays.n_blocked > 0) & (rays.n_free > 0)
             extra = np.maximum(self.partial_point_rays,
                                -(-self.partial_rays // np.maximum(c.points_per_link, 1))
