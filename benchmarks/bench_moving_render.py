@@ -191,16 +191,20 @@ def build(args, tmp):
             sn.sync(scene, settle_shadows=False)
         # Cycles' rays (bench_ray_shadow), EEVEE's shadow maps (bench_eevee_shadow): the
         # setting switched for one Update and one file, then back to the spheres
-        for tag, setting, value in (("rays", "cycles_shadows", "RAYS"),
-                                    ("maps", "eevee_shadows", "MAPS")):
+        # defaults: both settings as a new scene has them (Cycles' rays, EEVEE's shadow maps)
+        for tag, settings in (("rays", {"cycles_shadows": "RAYS"}),
+                              ("maps", {"eevee_shadows": "MAPS"}),
+                              ("defaults", {"cycles_shadows": "RAYS", "eevee_shadows": "MAPS"})):
             if n not in getattr(args, tag, ()):
                 continue
-            setattr(scene.relight, setting, value)
+            for setting, value in settings.items():
+                setattr(scene.relight, setting, value)
             t0 = time.perf_counter()
             assert bpy.ops.relight.update() == {"FINISHED"}
             info_out.setdefault(tag, {})[n] = time.perf_counter() - t0
             save(f"{tag}{n}")
-            setattr(scene.relight, setting, "SPHERES")
+            for setting in settings:
+                setattr(scene.relight, setting, "SPHERES")
             assert bpy.ops.relight.update() == {"FINISHED"}
     return paths, info_out
 

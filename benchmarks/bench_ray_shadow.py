@@ -8,7 +8,7 @@ render call alone timed, --runs rounds with the configurations in turn; median s
 median of each round's ratio to its baseline.  Accuracy is tested, not measured here
 (tests/test_sphere_nodes.py: the rays' factor against Cycles' direct light with and without the
 object).  Writes benchmarks/results/ray_shadow.md; on a Blender without the Raycast node
-(4.5 LTS: .venv-lts/bin/python) ray_shadow_4.5.md, where Cycles has the spheres only.
+(4.5 LTS: .venv-lts/bin/python) ray_shadow_4.5.md, where the rays read line tables instead.
 
     python benchmarks/bench_ray_shadow.py [--counts 32] [--samples 4,16] [--runs 3]
 """
@@ -40,9 +40,10 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="default: results/ray_shadow.md, or "
                     "ray_shadow_<major.minor>.md on a Blender without the Raycast node")
     args = ap.parse_args(argv)
-    build_args = argparse.Namespace(counts=args.counts, unculled=[], eevee=[], rays=args.counts)
+    build_args = argparse.Namespace(counts=args.counts, unculled=[], eevee=[], rays=args.counts,
+                                    defaults=args.counts)
     paths, info = bmr.build(build_args, tempfile.mkdtemp(prefix="relight_bench_rays_"))
-    tags = ["none"] + [f"{k}{n}" for n in args.counts for k in ("cull", "rays")]
+    tags = ["none"] + [f"{k}{n}" for n in args.counts for k in ("cull", "rays", "defaults")]
     times = {s: {t: [] for t in tags} for s in args.samples}
     for r in range(args.runs):
         for s in args.samples:
@@ -63,9 +64,12 @@ def main(argv=None):
              f"denoising, each file rendered in a fresh process, {args.runs} rounds in turn.  "
              "Baseline: Suzanne 'ignored' (no moving shadow).  Spheres: Cycles Moving Shadows "
              "'Spheres' (the culled sphere wiring, what EEVEE shows).  Rays: 'Rays' (one ray per "
-             "lamp term and shading point along the chord of Suzanne's bounding sphere)"
-             + ("." if has_rays else ": this Blender has no Raycast node (5.1+), so 'Rays' "
-                "falls back to the spheres and its rows measure the spheres again.") + "",
+             "lamp term and shading point along the chord of Suzanne's bounding sphere"
+             + (")" if has_rays else ": this Blender has no Raycast node (5.1+), so each ray "
+                "reads Suzanne's line table, core/relight/line_shadow.py)")
+             + ", EEVEE Moving Shadows 'Spheres' (their nodes stay in the materials: Cycles "
+             "reads them).  Defaults: both settings as a new scene has them (Cycles 'Rays', "
+             "EEVEE 'Shadow Maps': with two lamps no sphere is left in the materials).",
              "",
              f"Machine load (1-minute load average) before and after each render: median "
              f"{statistics.median(loads):.1f}, range {min(loads):.1f}-{max(loads):.1f}.", "",
@@ -76,12 +80,14 @@ def main(argv=None):
         for t, v in per.items():
             secs = [x[0] for x in v if x]
             ratios = [a[0] / b[0] for a, b in zip(v, base) if a and b]
-            kind = {"none": "baseline", "cull": "spheres", "rays": "rays"}[t.rstrip("0123456789")]
-            n = "-" if t == "none" else t.lstrip("culrays")
+            kind = {"none": "baseline", "cull": "spheres", "rays": "rays",
+                    "defaults": "defaults"}[t.rstrip("0123456789")]
+            n = "-" if t == "none" else t.rstrip("0123456789") and t[len(t.rstrip("0123456789")):]
             lines.append(f"| {s} | {kind} | {n} | {statistics.median(secs):.2f} | "
                          f"{min(secs):.2f}-{max(secs):.2f} | {statistics.median(ratios):.2f} |")
     lines += ["", "Update (s): " + ", ".join(
-        f"spheres {n}: {info[n]['update']:.2f}, rays: {info['rays'][n]:.2f}" for n in args.counts),
+        f"spheres {n}: {info[n]['update']:.2f}, rays: {info['rays'][n]:.2f}, defaults: "
+        f"{info['defaults'][n]:.2f}" for n in args.counts),
         "", "Raw (seconds, load before, load after per render):", "", "```",
         json.dumps({str(s): v for s, v in times.items()}), "```", ""]
     if args.out is None:

@@ -87,8 +87,9 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     cycles_shadows: EnumProperty(
         name="Cycles Moving Shadows", default="RAYS",
         items=(("RAYS", "Rays", "Cycles casts rays towards the lamps against the moving objects' "
-                                "real meshes (Blender 5.1 and later): their exact shadows, soft "
-                                "as samples add up; EEVEE shows the spheres' shadows"),
+                                "real meshes: their shadows, soft as samples add up (before "
+                                "Blender 5.1 each ray reads a table of the object's lines, "
+                                "traced on Update); EEVEE shows its own"),
                ("SPHERES", "Spheres", "Cycles shows the spheres' shadows, as EEVEE does")),
         description="How Cycles renders the moving virtual objects' shadows on the relit "
                     "surfaces (takes effect on Update)")

@@ -218,8 +218,7 @@ class RELIGHT_PT_virtual(_RelightPanel, bpy.types.Panel):
         if settings is not None:
             layout.prop(settings, "settle")
             layout.prop(settings, "eevee_shadows")
-            if hasattr(bpy.types, "ShaderNodeRaycast"):     # Blender 5.1+
-                layout.prop(settings, "cycles_shadows")
+            layout.prop(settings, "cycles_shadows")
         layout.operator("relight.eevee_light", icon='LIGHTPROBE_VOLUME')
 
 

@@ -6,6 +6,7 @@ import bpy
 import numpy as np
 
 from . import ids
+from .drivers import add_driver
 
 COLUMN = 220         # x step between the builder's columns
 ROW = 180            # y step between the rows of a column
@@ -67,9 +68,9 @@ class Builder:
         self._inputs(n, (a, b, c))
         return n.outputs[0]
 
-    def vmath(self, op, a, b=None, scale=None):
+    def vmath(self, op, a, b=None, scale=None, c=None):
         n = self.node("ShaderNodeVectorMath", operation=op)
-        self._inputs(n, (a, b))
+        self._inputs(n, (a, b, c))
         if scale is not None:
             if isinstance(scale, (int, float)):
                 n.inputs["Scale"].default_value = float(scale)
@@ -107,3 +108,29 @@ def new_group(name, inputs, outputs, key, tree_type="ShaderNodeTree"):
     gout = ng.nodes.new("NodeGroupOutput")
     ids.tag(ng, key)
     return ng, gin, gout
+
+
+def local_frame(b, obj):
+    """A function making, with Builder ``b``, the nodes that bring a world point into ``obj``'s
+    own frame: R^T (v - loc) / scale (``point=False``: a vector, R^T v / scale), the world
+    transform driven (location, the quaternion's conjugate, 1 / scale)."""
+    tree = b.tree.nodes
+    loc = tree.new("ShaderNodeCombineXYZ")
+    for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
+        add_driver(loc.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
+    u = tree.new("ShaderNodeCombineXYZ")
+    for i, w in enumerate(("ROT_X", "ROT_Y", "ROT_Z")):
+        add_driver(u.inputs[i], "-v", [("v", "TRANSFORMS", obj, w)])
+    w = tree.new("ShaderNodeValue")
+    add_driver(w.outputs[0], "v", [("v", "TRANSFORMS", obj, "ROT_W")])
+    inv = tree.new("ShaderNodeCombineXYZ")
+    for i, s in enumerate(("SCALE_X", "SCALE_Y", "SCALE_Z")):
+        add_driver(inv.inputs[i], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, s)])
+
+    def local(v, point=True):   # the quaternion's conjugate rotates back (a vector: no move)
+        d = b.vmath("SUBTRACT", v, loc.outputs[0]) if point else v
+        t = b.vmath("SCALE", b.vmath("CROSS_PRODUCT", u.outputs[0], d), scale=2.0)
+        r = b.vmath("ADD", b.vmath("ADD", d, b.vmath("SCALE", t, scale=w.outputs[0])),
+                    b.vmath("CROSS_PRODUCT", u.outputs[0], t))
+        return b.vmath("MULTIPLY", r, inv.outputs[0])
+    return local

@@ -1,4 +1,5 @@
-"""Moving virtual objects' shadows in Cycles by ray casting (Blender 5.1+'s Raycast node).
+"""Moving virtual objects' shadows in Cycles by ray casting (Blender 5.1+'s Raycast node; before
+it, the object's line table: line_nodes.py, the same group's interface).
 
 The sphere groups (sphere_nodes.py) give EEVEE and Cycles the same approximate shadow.  Where
 Blender has the Raycast node, the relit materials get a second output, for Cycles only, whose
@@ -16,6 +17,10 @@ keeps the spheres (its Raycast node works in screen space and cannot see towards
 * The random lamp point comes from a White Noise of the shading position and the lamp's index:
   Cycles jitters each sample's position within its pixel, so successive samples draw different
   points and the penumbra converges as samples add up.
+
+Before 5.1 the group has the same inputs and output and reads the object's line table instead of
+casting the ray (line_nodes.py): the mesh as it was at Update, carried by its transform, and
+nothing but the object is met.
 
 Nothing runs in Python at render time; the drivers are simple expressions as the spheres' are.
 """
@@ -61,8 +66,15 @@ def ray_groups(key):
 
 def make_ray_group(obj, tris, key):
     """The group of ``obj``: inputs Position and Target (world), output Visibility, 0 where the
-    segment from Position to Target meets the object inside its bounding sphere, else 1."""
+    segment from Position to Target meets the object inside its bounding sphere, else 1.  Where
+    Blender has no Raycast node, the same group reads the object's line table (line_nodes.py)."""
     centre, radius = mesh_bound(tris)
+    if not available():
+        from . import line_nodes
+        ng = line_nodes.make_line_group(obj, tris, key, centre, radius)
+        ng[RAY_OBJECT_KEY] = obj.name
+        ng[RAY_BOUND_KEY] = [*map(float, centre), radius]
+        return ng
     ng, gin, gout = new_group(f"Relight Ray {obj.name}",
                                [("Position", "NodeSocketVector"), ("Target", "NodeSocketVector")],
                                [("Visibility", "NodeSocketFloat")], key)
@@ -102,6 +114,15 @@ def make_ray_group(obj, tris, key):
     met = b.math("MULTIPLY", ray.outputs["Is Hit"], b.math("GREATER_THAN", span, 0.0))
     ng.links.new(b.math("SUBTRACT", 1.0, met), gout.inputs["Visibility"])
     return ng
+
+
+def remove_group(ng):
+    """Remove a ray group and what it alone uses (a line table's images)."""
+    from . import line_nodes
+    name, key = ng.get(RAY_OBJECT_KEY), ng.get(ids.SCENE_KEY)
+    bpy.data.node_groups.remove(ng)
+    if name is not None:
+        line_nodes.remove_images(name, key)
 
 
 def target_group(key):

@@ -17,14 +17,17 @@ map image's alpha).  Nothing runs in Python at render time:
   side, their intermediate values overflowed its 255-float SVM stack beyond 16-24 spheres).
   Spheres are fitted once; the object's animation, drags and parenting move them.
 * Culling (what cannot shadow costs no sphere): each lamp term a moving object can darken is its
-  own Mix Shader closure on "Reach" (the objects' bounding spheres against the cone round the
-  lamp, sphere_shadow.may_shadow, and a direct part in the map there), which Cycles' SVM jumps
-  over where it is 0; a lamp whose map has no direct part anywhere gets no spheres.  EEVEE
-  evaluates both branches: there only the lamps dropped save time.
+  own Mix Shader closure on "Reach" (a ``"Relight Reach <object>"`` group: the double cone
+  tangent to the object's bounding sphere and the lamp's ball, sphere_shadow.may_shadow, and a
+  direct part in the map there), which Cycles' SVM jumps over where it is 0; a lamp whose map
+  has no direct part anywhere gets no spheres.  EEVEE evaluates both branches: there only the
+  lamps dropped save time.  A material holds a sphere group only for the lamps an engine
+  evaluates spheres for (Cycles reads every node of a tree, used or not).
 
-* Cycles, where Blender has the Raycast node (5.1+) and the scene's Cycles Moving Shadows is
-  "Rays": the materials get a second output, for Cycles, whose factors take V from rays cast at
-  the objects' real meshes (ray_shadow.py).
+* Cycles, where the scene's Cycles Moving Shadows is "Rays": the materials get a second output,
+  for Cycles, whose factors take V from rays cast at the objects' real meshes (ray_shadow.py;
+  before Blender 5.1, which has no Raycast node, each ray reads the object's line table:
+  line_nodes.py).
 * EEVEE, where the scene's EEVEE Moving Shadows is "Shadow Maps": the material's own output
   takes V of (at most) two lamps from EEVEE's shadow maps of probe lights (eevee_shadow.py), and
   a second output serves Cycles (rays, or the spheres).  The spheres' reach branches stay (the
@@ -57,12 +60,13 @@ from . import eevee_shadow, ids, ray_shadow
 from .drivers import add_driver, frame_vars, world_point_expressions
 from .ids import MAP_SOURCE, scene_key
 from .images import CONTENT, MapWriter
-from .nodes import Builder, new_group
+from .nodes import Builder, local_frame, new_group
 from .roles import DEFAULT_SPHERES, moving, moving_objects, sphere_count  # noqa: F401
 from .write import MAP_PREFIX, SHADOW_PREFIX, T_NODE
 
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
+REACH_KEY = "relight_reach_object"     # on a reach group: the object's name
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (own frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
@@ -74,7 +78,7 @@ SURFACE_KEY = "relight_sphere_surface" # on a relit material: the closure its ou
 DIRECT_KEY = "relight_direct_max"      # on a map image: its largest alpha, for its content hash
 RAYS_KEY = "relight_sphere_rays"     # on a relit material: its own output was set to EEVEE
 CYCLES_OUTPUT = f"{NODE_PREFIX} Cycles output"
-WIRING_VERSION = 5                     # of the material wiring (older wirings are made again)
+WIRING_VERSION = 6                     # of the material wiring (older wirings are made again)
 # A map whose direct part (alpha) stays below this everywhere gets no sphere shadow: dropping
 # it changes the lamp's term by at most this fraction (the half-float maps' own spacing is 1e-3).
 DIRECT_FLOOR = 1e-3
@@ -194,7 +198,7 @@ def object_triangles(obj, depsgraph):
     return co.reshape(-1, 3).astype(np.float64)[tri.reshape(-1, 3)]
 
 
-GROUP_VERSION = 2                      # of the sphere groups (older ones are made again)
+GROUP_VERSION = 3                      # of the sphere groups (older ones are made again)
 
 
 def _fit_hash(tris, n):
@@ -275,62 +279,36 @@ def cap_group(key, tree_type="ShaderNodeTree"):
     return ng
 
 
-def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
-    """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame)
-    and whether the spheres' bounding sphere can hide any of it ("Reach", 0 or 1: where it is 0
-    the visibility is exactly 1, see sphere_shadow.may_shadow)."""
-    ng, gin, gout = new_group(f"Relight Spheres {obj.name}",
+def make_reach_group(obj, bound, key, fit_hash=""):
+    """The node group "Relight Reach <object>": inputs Position, Lamp and Lamp Radius (world),
+    output Reach, 1 where some sphere inside ``bound`` (the object's frame) can hide a part of
+    the lamp, 0 where the spheres' visibility is exactly 1 (sphere_shadow.may_shadow).  Its own
+    group, so that a material whose lamps need no sphere (Cycles' rays, EEVEE's shadow maps)
+    holds none: Cycles reads every node of a material's tree before it drops the unused ones
+    (measured: 32 spheres, two lamps, nine materials: +0.09 s a frame)."""
+    old = reach_group(key, obj.name)
+    if old is not None:
+        bpy.data.node_groups.remove(old)
+    ng, gin, gout = new_group(f"Relight Reach {obj.name}",
                                [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
                                 ("Lamp Radius", "NodeSocketFloat")],
-                               [("Visibility", "NodeSocketFloat"), ("Reach", "NodeSocketFloat")],
-                               key)
-    bound = bounding_sphere(centres, radii)
-    ng[OBJECT_KEY] = obj.name
+                               [("Reach", "NodeSocketFloat")], key)
+    ng[REACH_KEY] = obj.name
     ng[FIT_KEY] = fit_hash
-    ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
-    ng[BOUND_KEY] = [*map(float, bound[0]), float(bound[1])]
-    if hull is not None:
-        ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
     b = Builder(ng)
     tree = ng.nodes
-    # The object's world transform, driven: location, conjugate rotation (u, w), 1 / scale.
-    loc = tree.new("ShaderNodeCombineXYZ")
-    for i, w in enumerate(("LOC_X", "LOC_Y", "LOC_Z")):
-        add_driver(loc.inputs[i], "v", [("v", "TRANSFORMS", obj, w)])
-    u = tree.new("ShaderNodeCombineXYZ")
-    for i, w in enumerate(("ROT_X", "ROT_Y", "ROT_Z")):
-        add_driver(u.inputs[i], "-v", [("v", "TRANSFORMS", obj, w)])
-    w = tree.new("ShaderNodeValue")
-    add_driver(w.outputs[0], "v", [("v", "TRANSFORMS", obj, "ROT_W")])
-    inv = tree.new("ShaderNodeCombineXYZ")
-    for i, s in enumerate(("SCALE_X", "SCALE_Y", "SCALE_Z")):
-        add_driver(inv.inputs[i], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, s)])
-    inv_avg = tree.new("ShaderNodeValue")
-    add_driver(inv_avg.outputs[0], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, "SCALE_AVG")])
-
-    def local(v):   # R^T (v - loc) / scale: the quaternion's conjugate rotates back
-        d = b.vmath("SUBTRACT", v, loc.outputs[0])
-        t = b.vmath("SCALE", b.vmath("CROSS_PRODUCT", u.outputs[0], d), scale=2.0)
-        r = b.vmath("ADD", b.vmath("ADD", d, b.vmath("SCALE", t, scale=w.outputs[0])),
-                    b.vmath("CROSS_PRODUCT", u.outputs[0], t))
-        return b.vmath("MULTIPLY", r, inv.outputs[0])
-
     # Reach, in world space (so that points out of reach never pay the transform below): the
-    # bounding sphere, carried by the object's transform and grown to its largest scale, against
-    # the cone round the lamp, grown by the largest over the mean scale (the spheres see the
-    # lamp with a radius over the mean scale): a superset of what the object's frame would
-    # test, see sphere_shadow.may_shadow and world_bound
+    # bounding sphere, carried by the object's transform and grown to its largest scale, and
+    # the lamp's ball, grown by the largest over the mean scale (the spheres see the lamp with
+    # a radius over the mean scale): the double cone tangent to both (sphere_shadow.may_shadow,
+    # a superset of what the object's frame would test, see world_bound).  All but the last
+    # eight nodes are the same at every point (Cycles folds them into constants).
     pos_w = gin.outputs["Position"]
-    to_lw = b.vmath("SUBTRACT", gin.outputs["Lamp"], pos_w)
-    u_w = b.vmath("NORMALIZE", to_lw)
+    lamp_w = gin.outputs["Lamp"]
     grow = tree.new("ShaderNodeValue")
     add_driver(grow.outputs[0], "max(a, b, c) / max(d, 1e-9)",
                [(n, "TRANSFORMS", obj, w) for n, w in zip("abcd", ("SCALE_X", "SCALE_Y",
                                                                    "SCALE_Z", "SCALE_AVG"))])
-    sin_l = _clamped(b.math("DIVIDE", b.math("MULTIPLY", gin.outputs["Lamp Radius"],
-                                             grow.outputs[0]), b.vmath("LENGTH", to_lw)))
-    neg_sin = b.math("MULTIPLY", sin_l, -1.0)
-    cos_l = b.math("SQRT", b.math("MULTIPLY_ADD", sin_l, neg_sin, 1.0))
     centre_w = tree.new("ShaderNodeCombineXYZ")
     for i, expr in enumerate(world_point_expressions(bound[0])):
         add_driver(centre_w.inputs[i], expr, frame_vars(obj))
@@ -338,11 +316,60 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     add_driver(radius_w.outputs[0], f"{float(bound[1])!r} * max(a, b, c)",
                [(n, "TRANSFORMS", obj, w) for n, w in zip("abc", ("SCALE_X", "SCALE_Y",
                                                                   "SCALE_Z"))])
-    to_b = b.vmath("SUBTRACT", centre_w.outputs[0], pos_w)
-    h = b.vmath("LENGTH", b.vmath("CROSS_PRODUCT", to_b, u_w))
-    off = b.math("MULTIPLY_ADD", b.vmath("DOT_PRODUCT", to_b, u_w), neg_sin,
-                 b.math("MULTIPLY", h, cos_l))
-    ng.links.new(b.math("LESS_THAN", off, radius_w.outputs[0]), gout.inputs["Reach"])
+    r_w = b.math("MULTIPLY", gin.outputs["Lamp Radius"], grow.outputs[0])
+    both = b.math("ADD", radius_w.outputs[0], r_w)
+    cl = b.vmath("SUBTRACT", centre_w.outputs[0], lamp_w)
+    dist = b.vmath("LENGTH", cl)
+    axis = b.vmath("NORMALIZE", cl)
+    apex = b.vmath("ADD", lamp_w, b.vmath("SCALE", axis, scale=b.math(
+        "DIVIDE", b.math("MULTIPLY", dist, r_w), both)))
+    tan_b = b.math("DIVIDE", both, b.math("SQRT", b.math("MAXIMUM", b.math(
+        "SUBTRACT", b.math("MULTIPLY", dist, dist), b.math("MULTIPLY", both, both)), 1e-30)))
+    meet = b.math("LESS_THAN", dist, both)
+    b.column()
+    e = b.vmath("SUBTRACT", pos_w, apex)
+    along = b.math("ABSOLUTE", b.vmath("DOT_PRODUCT", e, axis))
+    across = b.vmath("LENGTH", b.vmath("CROSS_PRODUCT", e, axis))
+    inside = b.math("LESS_THAN", across, b.math("MULTIPLY", along, tan_b))
+    ng.links.new(b.math("MAXIMUM", inside, meet), gout.inputs["Reach"])
+    b.column()
+    return ng
+
+
+def reach_group(key, name):
+    """The reach group of object ``name``, or None."""
+    return next((ng for ng in bpy.data.node_groups
+                 if ng.get(REACH_KEY) == name and ng.get(ids.SCENE_KEY) == key), None)
+
+
+def remove_sphere_group(ng):
+    """Remove a sphere group and its object's reach group."""
+    reach = reach_group(ng.get(ids.SCENE_KEY), ng.get(OBJECT_KEY))
+    bpy.data.node_groups.remove(ng)
+    if reach is not None:
+        bpy.data.node_groups.remove(reach)
+
+
+def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
+    """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame),
+    and beside it the object's reach group (make_reach_group)."""
+    ng, gin, gout = new_group(f"Relight Spheres {obj.name}",
+                               [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
+                                ("Lamp Radius", "NodeSocketFloat")],
+                               [("Visibility", "NodeSocketFloat")], key)
+    bound = bounding_sphere(centres, radii)
+    ng[OBJECT_KEY] = obj.name
+    ng[FIT_KEY] = fit_hash
+    ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
+    ng[BOUND_KEY] = [*map(float, bound[0]), float(bound[1])]
+    if hull is not None:
+        ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
+    make_reach_group(obj, bound, key, fit_hash)
+    b = Builder(ng)
+    tree = ng.nodes
+    local = local_frame(b, obj)
+    inv_avg = tree.new("ShaderNodeValue")
+    add_driver(inv_avg.outputs[0], "1 / max(v, 1e-9)", [("v", "TRANSFORMS", obj, "SCALE_AVG")])
     # the lamp's cap seen from the point, in the object's frame (sphere_shadow.lamp_cap)
     p = local(gin.outputs["Position"])
     to_l = b.vmath("SUBTRACT", local(gin.outputs["Lamp"]), p)
@@ -620,7 +647,7 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
 
     ``probes`` ({lamp name: slot}, eevee_shadow.py): those lamps' V comes from EEVEE's shadow
     maps of the probe lights in the material's own output, which then serves EEVEE only.
-    ``rays`` (ray_shadow's groups, Blender 5.1+): likewise, a second output then serves Cycles:
+    ``rays`` (ray_shadow's groups): likewise, a second output then serves Cycles:
     one Emission of T x (sum of the lamp terms, each shadowed term's factor taking V from the
     rays towards a point of the lamp, or the settled V while the objects stand where it was
     traced).  With probes and no rays that second output takes V from the spheres."""
@@ -698,19 +725,28 @@ def _wire_material(mat, lamp_group_of, sphere_groups, settled=None, cull=True, r
         lamp = node("ShaderNodeGroup", f"Lamp {lname}", (x0, y))
         lamp.node_tree = lamp_group_of[lname]
         vis = reach = None
-        for i, sg in enumerate(sphere_groups):
-            g = node("ShaderNodeGroup", f"Spheres {sg[OBJECT_KEY]}", (x0 + 200, y - 120 * i))
-            g.node_tree = sg
+        # the spheres only where an engine evaluates them: no sphere in the tree when EEVEE
+        # takes this lamp's V from its shadow maps and Cycles from rays (make_reach_group)
+        spheres = lname not in probes or not rays
+
+        def group(tree_of, label, k):
+            g = node("ShaderNodeGroup", f"{label} {tree_of.get(OBJECT_KEY) or tree_of.get(REACH_KEY)}",
+                     (x0 + 200, y - 120 * k))
+            g.node_tree = tree_of
             tree.links.new(geo.outputs["Position"], g.inputs["Position"])
             tree.links.new(lamp.outputs["Position"], g.inputs["Lamp"])
             tree.links.new(lamp.outputs["Radius"], g.inputs["Lamp Radius"])
-            if vis is None:
-                vis, reach = g.outputs["Visibility"], g.outputs["Reach"]
-            else:
-                vis = math("MULTIPLY", vis, g.outputs["Visibility"], "Product",
-                           (x0 + 400, y - 120 * i))
-                reach = math("MAXIMUM", reach, g.outputs["Reach"], "Reach",
-                             (x0 + 400, y - 120 * i - 60))
+            return g
+
+        for i, sg in enumerate(sphere_groups):
+            r_out = group(reach_group(sg.get(ids.SCENE_KEY), sg[OBJECT_KEY]), "Reach",
+                          2 * i + 1).outputs["Reach"]
+            reach = r_out if reach is None else math("MAXIMUM", reach, r_out, "Reach",
+                                                     (x0 + 400, y - 120 * i - 60))
+            if spheres:
+                v_out = group(sg, "Spheres", 2 * i).outputs["Visibility"]
+                vis = v_out if vis is None else math("MULTIPLY", vis, v_out, "Product",
+                                                     (x0 + 400, y - 120 * i))
         sphere_vis = vis
         if lname in probes:              # EEVEE's shadow maps (the spheres serve Cycles)
             slot = probes[lname]
@@ -866,7 +902,7 @@ def _use_rays(scene, rays):
     ("Cycles Moving Shadows") unless ``rays`` says, where this Blender has the Raycast node."""
     if rays is None:
         rays = getattr(getattr(scene, "relight", None), "cycles_shadows", "RAYS") == "RAYS"
-    return bool(rays) and ray_shadow.available()
+    return bool(rays)
 
 
 def _use_maps(scene, maps):
@@ -930,21 +966,23 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
             rg = old_rays.pop(obj.name, None)
             if rg is None or rg.get(FIT_KEY) != h:
                 if rg is not None:
-                    bpy.data.node_groups.remove(rg)
+                    ray_shadow.remove_group(rg)
                 rg = ray_shadow.make_ray_group(obj, tris, key)
                 rg[FIT_KEY] = h
             rays_wanted.append(rg)
         old = groups.pop(obj.name, None)
-        if old is not None and old.get(FIT_KEY) == h:
+        if old is not None and old.get(FIT_KEY) == h and reach_group(key, obj.name) is not None:
             wanted.append(old)
             continue
         if old is not None:
-            bpy.data.node_groups.remove(old)
+            remove_sphere_group(old)
         centres, radii = fit_spheres(tris, n, seed)
         wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris)))
         fitted += 1
-    for stale in [*groups.values(), *old_rays.values()]:
-        bpy.data.node_groups.remove(stale)
+    for stale in groups.values():
+        remove_sphere_group(stale)
+    for stale in old_rays.values():
+        ray_shadow.remove_group(stale)
     objs = [bpy.data.objects[g[OBJECT_KEY]] for g in wanted]
     fits = {g[OBJECT_KEY]: g[FIT_KEY] for g in wanted}
     flag_group, settled_s = settled_group(key), 0.0

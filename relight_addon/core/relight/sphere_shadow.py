@@ -120,21 +120,35 @@ def bounding_sphere(centres, radii):
 
 def may_shadow(points, lamp_pos, lamp_radius, bound):
     """Whether (n,) a sphere of the set inside ``bound`` = (centre, radius) can hide a part of
-    the lamp from ``points``: False only where the bound's cap misses the lamp's cap, and then
-    every sphere's blocked part is 0 and sphere_visibility gives exactly 1.
+    the lamp from ``points``: False only where no half-line from the point meets both the
+    bound and the lamp's ball, and then every sphere's blocked part is 0 and
+    sphere_visibility gives exactly 1 (a sphere hides a part of the lamp only along
+    directions that meet the lamp's cap and its own, and those half-lines meet both balls).
 
-    The test is the sphere against the cone from the point round the lamp (half-angle theta_L):
-    h cos theta_L - t sin theta_L < R, with t and h the bound's centre along and off the axis
-    (d sin(gamma - theta_L) < d sin theta_O, i.e. gamma < theta_L + theta_O): no inverse
-    trigonometry, no division.  It also passes, needlessly, for some points that have the
-    object right behind them (gamma - theta_L beyond 90 degrees), and the lamp's distance is not
-    tested (a bound beyond the lamp passes too): both only cost render time.  A point inside the
-    bound passes (h cos - t sin = d sin(gamma - theta_L) <= d < R)."""
-    u, _, th_l, _ = lamp_cap(points, lamp_pos, lamp_radius)
-    to_b = np.asarray(bound[0], float) - np.asarray(points, float)
-    t = np.sum(to_b * u, axis=-1)
-    h = np.linalg.norm(np.cross(to_b, u), axis=-1)
-    return h * np.cos(th_l) - t * np.sin(th_l) < bound[1]
+    Such points lie in the double cone tangent to both balls with its apex between them, at
+    their internal centre of similitude S (the nappe on the bound's side holds the object's
+    penumbra, the other the lamp's ball and what sees the object past it):
+    |(p - S) x c| < |(p - S) . c| tan beta, c the unit vector from the lamp to the bound's
+    centre, sin beta = (R + r) / D, D their distance (a line meets both balls only inside
+    it).  Everything passes where the two balls meet.  Every quantity but p - S is the same
+    for every point, so a material computes them once (Cycles folds them into constants):
+    eight nodes a point and lamp.  Some points pass needlessly (between S and the object, off
+    its penumbra; behind the lamp): only render time."""
+    p = np.asarray(points, float)
+    lamp = np.asarray(lamp_pos, float)
+    centre, big = np.asarray(bound[0], float), float(bound[1])
+    r = max(float(lamp_radius), 0.0)
+    cl = centre - lamp
+    dist = float(np.linalg.norm(cl))
+    both = big + r
+    if dist <= both:
+        return np.ones(p.shape[:-1], bool)
+    c = cl / dist
+    apex = lamp + c * (dist * r / both)
+    e = p - apex
+    along = e @ c
+    across = np.linalg.norm(np.cross(e, c), axis=-1)
+    return across < np.abs(along) * (both / np.sqrt(dist * dist - both * both))
 
 
 def world_bound(bound, matrix):
