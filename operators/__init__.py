@@ -24,6 +24,11 @@ def _ar_draw():
     return ar_draw
 
 
+def _relit_draw():
+    from ..relight_addon.blender import relit_draw
+    return relit_draw
+
+
 def register():
     _one_line_tooltips()
     _register()
@@ -31,9 +36,11 @@ def register():
     settle.attach()
     capture.attach()
     _ar_draw().register_draw()          # AR mode's live viewport (nothing in background mode)
+    _relit_draw().register_draw()       # the relit preview in Solid shading (likewise)
 
 
 def unregister():
+    _relit_draw().unregister_draw()
     _ar_draw().unregister_draw()
     capture.detach()
     settle.detach()

@@ -84,13 +84,21 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                          description="On Update, ray-trace the moving objects' real shadows "
                                      "where they stand; the materials use them until an "
                                      "object moves (then its spheres' shadow)")
+    relit_preview: BoolProperty(
+        name="Relit Preview in Solid", default=False,
+        description="In Solid viewport shading, draw the relit surfaces as the relit materials "
+                    "show them, with the moving objects' sphere shadows, live while they move "
+                    "(nothing to compile; Material Preview and Rendered show the materials "
+                    "themselves)")
     cycles_shadows: EnumProperty(
         name="Cycles Moving Shadows", default="RAYS",
         items=(("RAYS", "Rays", "Cycles casts rays towards the lamps against the moving objects' "
-                                "real meshes: their shadows, soft as samples add up (before "
-                                "Blender 5.1 each ray reads a table of the object's lines, "
-                                "traced on Update); EEVEE shows its own"),
-               ("SPHERES", "Spheres", "Cycles shows the spheres' shadows, as EEVEE does")),
+                                "real meshes: their shadows, soft as samples add up. Before "
+                                "Blender 5.1 each ray reads a table of the object's lines traced "
+                                "on Update: a mesh deformed since (armature, modifier) keeps its "
+                                "shadow until the next Update"),
+               ("SPHERES", "Spheres", "Cycles shows the spheres' shadows (what EEVEE shows with "
+                                      "EEVEE Moving Shadows: Spheres)")),
         description="How Cycles renders the moving virtual objects' shadows on the relit "
                     "surfaces (takes effect on Update)")
     eevee_shadows: EnumProperty(

@@ -219,6 +219,7 @@ class RELIGHT_PT_virtual(_RelightPanel, bpy.types.Panel):
             layout.prop(settings, "settle")
             layout.prop(settings, "eevee_shadows")
             layout.prop(settings, "cycles_shadows")
+            layout.prop(settings, "relit_preview")
         layout.operator("relight.eevee_light", icon='LIGHTPROBE_VOLUME')
 
 

@@ -30,10 +30,15 @@ HDRIS = T.bundled_hdris()
 @pytest.mark.skipif(GLSLANG is None, reason="glslangValidator not found")
 @pytest.mark.parametrize("stage", ["vert", "frag"])
 def test_shader_compiles(stage):
+    assert_compiles(stage, ar_shader.standalone_glsl(stage))
+
+
+def assert_compiles(stage, source):
+    """glslangValidator accepts ``source`` as a ``stage`` ('vert' or 'frag') shader."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "ar." + stage)
+        path = os.path.join(tmp, "shader." + stage)
         with open(path, "w") as f:
-            f.write(ar_shader.standalone_glsl(stage))
+            f.write(source)
         run = subprocess.run([GLSLANG, "-S", stage, path], capture_output=True, text=True,
                              timeout=60)
     assert run.returncode == 0, run.stdout + run.stderr

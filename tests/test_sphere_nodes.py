@@ -33,7 +33,7 @@ bpy = pytest.importorskip("bpy")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-from helpers.blender import PKG, addon  # noqa: E402
+from helpers.blender import PKG, addon, pack_all  # noqa: E402
 from helpers.room import build_scene  # noqa: E402
 from relight_addon.core.relight.sphere_shadow import sphere_visibility, to_local  # noqa: E402
 
@@ -217,6 +217,66 @@ def test_node_groups_match_their_numpy_twin(room):
     finally:
         for n, o in lamps.items():
             o.data.energy = powers[n]
+
+
+def test_relit_preview_draws_what_the_material_shows(room):
+    """The viewport's relit preview (relit_draw.py, drawn by relit_frag.glsl, whose numpy twin
+    core/display/relit.py is tested against the shader in test_relit_shader.py) gathers from
+    the scene what the relit material computes: the floor's T and maps sampled at each texel,
+    the lamps' scales, places and the moving Suzanne's spheres from frame_data, through the
+    twin, against Cycles' EMIT bake of the floor's relit material itself (its sphere shadows,
+    settling off), texel by texel; and with a lamp dimmed, the frame's scale follows its
+    driver."""
+    from relight_addon.core.display.relit import lamp_visibility, relit_colour
+    from relight_addon.core.relight.line_shadow import bilinear
+    rd = importlib.import_module(PKG + ".relight_addon.blender.relit_draw")
+    scene = bpy.context.scene
+    floor = bpy.data.objects["Floor"]
+    assert rd.register_draw() is False and not rd.is_registered()    # background: no gpu
+    bpy.context.view_layer.update()      # the drivers' values, as a viewport redraw sees them
+    draws = {(n, i): (m, u) for n, i, m, u in rd.frame_data(scene)}
+    assert ("Floor", 0) in draws and len(draws) >= 6
+    mat_name, u = draws[("Floor", 0)]
+    mat = bpy.data.materials[mat_name]
+    inputs = rd.material_inputs(mat)
+    assert [n for n, _, _ in inputs["lamps"]] == ["LampA", "LampB"] and u["n_lamps"] == 2
+    assert u["n_objects"] == 1 and u["object_end"][0] == 8
+    for k, name in enumerate(("LampA", "LampB")):
+        lamp = bpy.data.objects[name]
+        assert np.allclose(u["lamps"][k, :3], lamp.location, atol=1e-5)
+        assert abs(u["lamps"][k, 3] - _lamp_radius(lamp)) < 1e-5
+    got = _bake(floor, mat)[..., :3].reshape(-1, 3)
+    P = _bake(floor, _position_material())[..., :3].reshape(-1, 3)
+    j, i = np.meshgrid(np.arange(BAKE), np.arange(BAKE), indexing="ij")
+    uu, vv = ((i + 0.5) / BAKE).ravel(), ((j + 0.5) / BAKE).ravel()
+
+    def sample(img):
+        px = rd._pixels(img).astype(np.float64)
+        return bilinear(px, uu * px.shape[1], vv * px.shape[0])
+
+    t = sample(inputs["t"])[:, :3]
+    maps = np.stack([sample(img) for _, img, _ in inputs["lamps"]])
+    ids = importlib.import_module(PKG + ".relight_addon.blender.ids")
+    objects = rd.moving_spheres(scene, ids.scene_key(scene))
+    vis = np.stack([lamp_visibility(P, u["lamps"][k, :3], u["lamps"][k, 3], objects)
+                    for k in range(2)])
+    want = relit_colour(t, maps, u["lamp_scale"][:2, :3], vis)
+    inner = ((i > 0) & (i < BAKE - 1) & (j > 0) & (j < BAKE - 1)).ravel()   # (edge wrapping)
+    rel = np.abs(got - want)[inner] / np.maximum(want[inner], 1e-3)
+    print(f"relit preview against the material's bake: {int((vis < 0.5).sum())} shadowed "
+          f"texel-lamps, relative difference median {np.median(rel):.1e}, max {rel.max():.1e}")
+    assert (vis < 0.5).sum() >= 5 and np.isfinite(got).all()
+    assert np.median(rel) < 2e-3 and rel.max() < 2e-2      # (half-float maps; measured 5e-4)
+    lamp_a = bpy.data.objects["LampA"]
+    power = lamp_a.data.energy
+    try:
+        lamp_a.data.energy = power / 4
+        bpy.context.view_layer.update()
+        u2 = {(n, i): v for n, i, _, v in rd.frame_data(scene)}[("Floor", 0)]
+        assert np.allclose(u2["lamp_scale"][0, :3], u["lamp_scale"][0, :3] / 4, rtol=1e-5)
+    finally:
+        lamp_a.data.energy = power
+        bpy.context.view_layer.update()
 
 
 def test_line_table_group_matches_its_numpy_twin(room):
@@ -546,6 +606,52 @@ def test_update_fits_follows_the_count_and_forgets_deleted_objects(room, tmp_pat
     # Clear removes the lamp groups too
     assert bpy.ops.relight.clear() == {"FINISHED"}
     assert not [g for g in bpy.data.node_groups if g.get("relight_generated")]
+
+
+def test_defaults_keep_no_sphere_in_the_materials_and_the_spheres_in_the_file(tmp_path):
+    """With both Moving Shadows settings at their defaults (Cycles' rays, EEVEE's shadow maps
+    for the test room's two lamps) no relit material holds a sphere group (Cycles reads every
+    node of a tree), each holds the object's reach group, whose bound holds the mesh's (the
+    rays meet the mesh); the sphere group, used by no material, is still in the file after a
+    save and reopen (the settling and the next Update read it); a ray group of the other
+    Blender line's kind (a file from 5.1+ opened in 4.5, or back) is made again on Update."""
+    addon()
+    build_scene()
+    scene = bpy.context.scene
+    scene.relight.preset = "draft"
+    assert (scene.relight.cycles_shadows, scene.relight.eevee_shadows) == ("RAYS", "MAPS")
+    assert bpy.ops.relight.precompute(preset="draft") == {"FINISHED"}
+    monkey = _monkey(spheres=8)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    sn = _nodes()
+    rs = importlib.import_module(PKG + ".relight_addon.blender.ray_shadow")
+    mats = [m for m in bpy.data.materials if m.name.endswith(".relight")]
+    used = {n.node_tree.name for m in mats for n in m.node_tree.nodes
+            if n.bl_idname == "ShaderNodeGroup" and n.node_tree is not None}
+    assert "Relight Reach Monkey" in used and "Relight Spheres Monkey" not in used
+    # the reach's bound radius (driven: the bound's times the largest scale) holds the mesh's
+    reach = bpy.data.node_groups["Relight Reach Monkey"]
+    tris = sn.object_triangles(monkey, bpy.context.evaluated_depsgraph_get())
+    _, mesh_r = rs.mesh_bound(tris)
+    _, sphere_r = sn.group_bound(bpy.data.node_groups["Relight Spheres Monkey"])
+    reach_r = next(n.outputs[0].default_value for n in reach.nodes
+                   if n.label == "Bound radius")
+    print(f"reach radius {reach_r:.3f}, the mesh's bound {mesh_r * max(monkey.scale):.3f}, "
+          f"the spheres' {sphere_r * max(monkey.scale):.3f}")
+    assert reach_r >= mesh_r * max(monkey.scale) * 0.999
+    ray = next(g for g in bpy.data.node_groups if g.get(rs.RAY_OBJECT_KEY) == "Monkey")
+    assert rs.current_kind(ray)
+    pack_all()                          # the test room's photos are generated images
+    path = str(tmp_path / "defaults.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert "Relight Spheres Monkey" in bpy.data.node_groups
+    ray = next(g for g in bpy.data.node_groups if g.get(rs.RAY_OBJECT_KEY) == "Monkey")
+    ray[rs.KIND_KEY] = "lines" if rs.available() else "raycast"     # the other line's
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    ray = next(g for g in bpy.data.node_groups if g.get(rs.RAY_OBJECT_KEY) == "Monkey")
+    assert rs.current_kind(ray)
+    assert any(n.bl_idname == "ShaderNodeRaycast" for n in ray.nodes) == rs.available()
 
 
 def test_a_lamp_added_after_a_moving_object_is_shadowed_by_it():

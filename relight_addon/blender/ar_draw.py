@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import ar_nodes, ids
+from . import ar_nodes, draw_handlers, ids
 
 # the handle and the GPU objects the handler made (made once, dropped when it is removed)
 cache = {"handle": None, "shader": None, "batch": None, "batch_key": None,
@@ -116,24 +116,8 @@ def table_textures(st):
 # -- gpu (only reached with a UI) ---------------------------------------------------------------
 
 def shader_create_info():
-    import gpu
-    from . import ar_shader as S
-    info = gpu.types.GPUShaderCreateInfo()
-    for slot, typ, name in S.VERTEX_INPUTS:
-        info.vertex_in(slot, typ, name)
-    for typ, name, size in S.PUSH_CONSTANTS:
-        info.push_constant(typ, name, size)
-    for slot, typ, name in S.SAMPLERS:
-        info.sampler(slot, typ, name)
-    iface = gpu.types.GPUStageInterfaceInfo("relight_ar_iface")
-    for typ, name in S.VARYINGS:
-        iface.smooth(typ, name)
-    info.vertex_out(iface)
-    for slot, typ, name in S.FRAGMENT_OUTPUTS:
-        info.fragment_out(slot, typ, name)
-    info.vertex_source(S.read_body("vert"))
-    info.fragment_source(S.read_body("frag"))
-    return info
+    from . import ar_shader
+    return ar_shader.create_info()
 
 
 def _texture(array, layers=0):
@@ -159,19 +143,6 @@ def _set_uniforms(shader, u):
     shader.uniform_int("n_lights", int(u["n_lights"]))
     shader.uniform_float("hull", [float(x) for x in u["hull"]])
     shader.uniform_float("e_floor", float(u["e_floor"]))
-
-
-def _draw():
-    """The SpaceView3D POST_VIEW callback: a failure is printed once and turns the drawing off
-    (a traceback at every redraw would flood the console), until the handler is installed
-    again."""
-    if cache["failed"] is not None:
-        return
-    try:
-        draw_frame()
-    except Exception as ex:  # noqa: BLE001 - any gpu or data error: stop drawing, say why
-        cache["failed"] = f"{type(ex).__name__}: {ex}"
-        print(f"Relight: the AR viewport shadows are off ({cache['failed']})")
 
 
 def draw_frame(context=None):
@@ -231,20 +202,9 @@ def is_registered():
 
 def register_draw():
     """Install the draw handler; False (and nothing done) in background mode."""
-    import bpy
-    if bpy.app.background:
-        return False
-    if cache["handle"] is None:
-        cache["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw, (), "WINDOW",
-                                                                  "POST_VIEW")
-    return True
+    return draw_handlers.install(cache, draw_handlers.guarded(cache, draw_frame, "the AR viewport shadows"))
 
 
 def unregister_draw():
     """Remove the draw handler (if any) and drop the gpu objects."""
-    import bpy
-    handle = cache["handle"]
-    cache.update(handle=None, shader=None, batch=None, batch_key=None, textures=None,
-                  tables_key=None, failed=None)
-    if handle is not None:
-        bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")
+    draw_handlers.remove(cache, shader=None, batch=None, batch_key=None, textures=None, tables_key=None)

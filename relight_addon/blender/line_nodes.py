@@ -58,9 +58,11 @@ def make_line_group(obj, tris, key, centre, radius, occluder=None, start=1e-3):
     b = Builder(ng)
     local = local_frame(b, obj)
     r = float(radius)
-    target = gin.outputs["Target"]
-    q = local(target)
-    dv = local(b.vmath("SUBTRACT", target, gin.outputs["Position"]), point=False)
+    target, position = gin.outputs["Target"], gin.outputs["Position"]
+    # the point, made to depend on the target by a term far below float32's reach (a sun's
+    # target is 1e5 m away: the point from it would keep few digits)
+    p = local(b.vmath("MULTIPLY_ADD", target, (1e-30,) * 3, c=position))
+    dv = local(b.vmath("SUBTRACT", target, position), point=False)
     length = b.vmath("LENGTH", dv)
     u = b.vmath("NORMALIZE", dv)
     b.column()
@@ -89,7 +91,7 @@ def make_line_group(obj, tris, key, centre, radius, occluder=None, start=1e-3):
     e1, e2 = look(at1, bas, "Closest"), look(at2, bas, "Closest")
     b.column()
     # the centre's foot on the ray, and the ray's offsets in the tile (texels from its middle)
-    w = b.vmath("ADD", b.vmath("SUBTRACT", tuple(float(x) for x in centre), q), dv)
+    w = b.vmath("SUBTRACT", tuple(float(x) for x in centre), p)
     tc = b.vmath("DOT_PRODUCT", w, u)
     o = b.vmath("SUBTRACT", b.vmath("SCALE", u, scale=tc), w)
     st = b.node("ShaderNodeCombineXYZ")

@@ -35,6 +35,7 @@ from .nodes import Builder, new_group
 
 RAY_OBJECT_KEY = "relight_ray_object"   # on a ray group: the object's name
 RAY_BOUND_KEY = "relight_ray_bound"     # on a ray group: x, y, z, radius (object frame)
+KIND_KEY = "relight_ray_kind"           # on a ray group: "raycast" or "lines" (its Blender's)
 TARGET_KEY = "relight_ray_target"       # on the shared lamp-point group: its version
 TARGET_VERSION = 1
 TARGET_GROUP = "Relight Ray Lamp Point"
@@ -47,6 +48,12 @@ MARGIN = 1.02                           # the bounding sphere, grown: float roun
 def available() -> bool:
     """Whether this Blender has the Raycast shader node (5.1+)."""
     return hasattr(bpy.types, "ShaderNodeRaycast")
+
+
+def current_kind(ng) -> bool:
+    """Whether ray group ``ng`` is the kind this Blender makes (a file saved by another Blender
+    line: the Raycast node where there is none, or a line table where there is one)."""
+    return ng.get(KIND_KEY) == ("raycast" if available() else "lines")
 
 
 def mesh_bound(tris):
@@ -74,12 +81,14 @@ def make_ray_group(obj, tris, key):
         ng = line_nodes.make_line_group(obj, tris, key, centre, radius)
         ng[RAY_OBJECT_KEY] = obj.name
         ng[RAY_BOUND_KEY] = [*map(float, centre), radius]
+        ng[KIND_KEY] = "lines"
         return ng
     ng, gin, gout = new_group(f"Relight Ray {obj.name}",
                                [("Position", "NodeSocketVector"), ("Target", "NodeSocketVector")],
                                [("Visibility", "NodeSocketFloat")], key)
     ng[RAY_OBJECT_KEY] = obj.name
     ng[RAY_BOUND_KEY] = [*map(float, centre), radius]
+    ng[KIND_KEY] = "raycast"
     b = Builder(ng)
     c_w = b.node("ShaderNodeCombineXYZ", label="Bound centre")
     for i, expr in enumerate(world_point_expressions(centre)):

@@ -198,7 +198,7 @@ def object_triangles(obj, depsgraph):
     return co.reshape(-1, 3).astype(np.float64)[tri.reshape(-1, 3)]
 
 
-GROUP_VERSION = 3                      # of the sphere groups (older ones are made again)
+GROUP_VERSION = 4                      # of the sphere groups (older ones are made again)
 
 
 def _fit_hash(tris, n):
@@ -302,7 +302,7 @@ def make_reach_group(obj, bound, key, fit_hash=""):
     # the lamp's ball, grown by the largest over the mean scale (the spheres see the lamp with
     # a radius over the mean scale): the double cone tangent to both (sphere_shadow.may_shadow,
     # a superset of what the object's frame would test, see world_bound).  All but the last
-    # eight nodes are the same at every point (Cycles folds them into constants).
+    # nine nodes are the same at every point (Cycles folds them into constants).
     pos_w = gin.outputs["Position"]
     lamp_w = gin.outputs["Lamp"]
     grow = tree.new("ShaderNodeValue")
@@ -313,22 +313,24 @@ def make_reach_group(obj, bound, key, fit_hash=""):
     for i, expr in enumerate(world_point_expressions(bound[0])):
         add_driver(centre_w.inputs[i], expr, frame_vars(obj))
     radius_w = tree.new("ShaderNodeValue")
+    radius_w.label = "Bound radius"
     add_driver(radius_w.outputs[0], f"{float(bound[1])!r} * max(a, b, c)",
                [(n, "TRANSFORMS", obj, w) for n, w in zip("abc", ("SCALE_X", "SCALE_Y",
                                                                   "SCALE_Z"))])
-    r_w = b.math("MULTIPLY", gin.outputs["Lamp Radius"], grow.outputs[0])
-    both = b.math("ADD", radius_w.outputs[0], r_w)
     cl = b.vmath("SUBTRACT", centre_w.outputs[0], lamp_w)
     dist = b.vmath("LENGTH", cl)
     axis = b.vmath("NORMALIZE", cl)
-    apex = b.vmath("ADD", lamp_w, b.vmath("SCALE", axis, scale=b.math(
-        "DIVIDE", b.math("MULTIPLY", dist, r_w), both)))
+    slack = b.math("MULTIPLY", b.math("ADD", dist, radius_w.outputs[0]),
+                   2.0 * float(np.sin(0.5 * EPS_ANGLE)))
+    r_w = b.math("MULTIPLY_ADD", gin.outputs["Lamp Radius"], grow.outputs[0], slack)
+    both = b.math("ADD", radius_w.outputs[0], r_w)
+    offset = b.math("DIVIDE", b.math("MULTIPLY", dist, radius_w.outputs[0]), both)
     tan_b = b.math("DIVIDE", both, b.math("SQRT", b.math("MAXIMUM", b.math(
         "SUBTRACT", b.math("MULTIPLY", dist, dist), b.math("MULTIPLY", both, both)), 1e-30)))
     meet = b.math("LESS_THAN", dist, both)
     b.column()
-    e = b.vmath("SUBTRACT", pos_w, apex)
-    along = b.math("ABSOLUTE", b.vmath("DOT_PRODUCT", e, axis))
+    e = b.vmath("SUBTRACT", pos_w, centre_w.outputs[0])
+    along = b.math("ABSOLUTE", b.math("ADD", b.vmath("DOT_PRODUCT", e, axis), offset))
     across = b.vmath("LENGTH", b.vmath("CROSS_PRODUCT", e, axis))
     inside = b.math("LESS_THAN", across, b.math("MULTIPLY", along, tan_b))
     ng.links.new(b.math("MAXIMUM", inside, meet), gout.inputs["Reach"])
@@ -350,9 +352,11 @@ def remove_sphere_group(ng):
         bpy.data.node_groups.remove(reach)
 
 
-def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
+def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None, mesh=None):
     """The node group returning the part of a lamp seen past ``obj``'s spheres (object frame),
-    and beside it the object's reach group (make_reach_group)."""
+    and beside it the object's reach group (make_reach_group) for a bound holding the spheres
+    and ``mesh`` = (centre, radius), the mesh's own bound (the rays meet the mesh, which the
+    spheres' bound may not hold: a cube's corners)."""
     ng, gin, gout = new_group(f"Relight Spheres {obj.name}",
                                [("Position", "NodeSocketVector"), ("Lamp", "NodeSocketVector"),
                                 ("Lamp Radius", "NodeSocketFloat")],
@@ -360,11 +364,18 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None):
     bound = bounding_sphere(centres, radii)
     ng[OBJECT_KEY] = obj.name
     ng[FIT_KEY] = fit_hash
+    # kept when no material holds it (Cycles' rays and EEVEE's shadow maps): the settling
+    # after a drag and the next Update read its spheres
+    ng.use_fake_user = True
     ng[SPHERES_KEY] = np.column_stack([centres, radii]).astype(float).ravel().tolist()
     ng[BOUND_KEY] = [*map(float, bound[0]), float(bound[1])]
     if hull is not None:
         ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
-    make_reach_group(obj, bound, key, fit_hash)
+    reach = bound
+    if mesh is not None:
+        gap = float(np.linalg.norm(np.asarray(mesh[0], float) - bound[0]))
+        reach = (bound[0], max(float(bound[1]), gap + float(mesh[1])))
+    make_reach_group(obj, reach, key, fit_hash)
     b = Builder(ng)
     tree = ng.nodes
     local = local_frame(b, obj)
@@ -898,8 +909,9 @@ def _vadd(node, tree, a, b, y):
 
 
 def _use_rays(scene, rays):
-    """Whether Cycles takes the moving shadows from rays (ray_shadow.py): the scene's setting
-    ("Cycles Moving Shadows") unless ``rays`` says, where this Blender has the Raycast node."""
+    """Whether Cycles takes the moving shadows from rays (ray_shadow.py; the line tables where
+    this Blender has no Raycast node): the scene's setting ("Cycles Moving Shadows") unless
+    ``rays`` says."""
     if rays is None:
         rays = getattr(getattr(scene, "relight", None), "cycles_shadows", "RAYS") == "RAYS"
     return bool(rays)
@@ -964,7 +976,7 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
         h = _fit_hash(tris, n)
         if use_rays:
             rg = old_rays.pop(obj.name, None)
-            if rg is None or rg.get(FIT_KEY) != h:
+            if rg is None or rg.get(FIT_KEY) != h or not ray_shadow.current_kind(rg):
                 if rg is not None:
                     ray_shadow.remove_group(rg)
                 rg = ray_shadow.make_ray_group(obj, tris, key)
@@ -977,7 +989,8 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
         if old is not None:
             remove_sphere_group(old)
         centres, radii = fit_spheres(tris, n, seed)
-        wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris)))
+        wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris),
+                                        ray_shadow.mesh_bound(tris)))
         fitted += 1
     for stale in groups.values():
         remove_sphere_group(stale)

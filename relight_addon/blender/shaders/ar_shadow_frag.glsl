@@ -1,7 +1,8 @@
 /* Relight AR sphere shadows under an environment: fragment stage BODY (declarations injected,
  * see relight_addon/blender/ar_shader.py).  The numpy twin is
  * relight_addon/core/ar/env_shadow.py, env_shadow_factor(weighting="light+caps", cap="exact"):
- * the same operations in the same order (cap.py, env_shadow.py, relight/sphere_shadow.py).
+ * the same operations in the same order (cap.py, env_shadow.py, relight/sphere_shadow.py;
+ * relight_lamp_blocked and EPS_ANGLE come from sphere_lamp.glsl, read before this body).
  *
  * Interface:
  *   in  vec3 v_pos, v_nor;                 receiver point and normal, world space
@@ -28,7 +29,6 @@ const int MAX_SPHERES = 128;
 const int MAX_LIGHTS = 4;
 const int N_CAP = 10;
 const float PI = 3.14159265358979;
-const float EPS_ANGLE = 1e-4;
 const float SUN_DISTANCE = 1.0e5;
 
 /* envmap.py: sample_nodes' texture coordinates for a table of h rows */
@@ -56,34 +56,6 @@ float relight_cap_cosine(float cb, float s2)
   float sy = sb * sqrt(max(1.0 - y * y, 0.0));
   float c = (cb * acos(y) - x * sy) * s2 + atan(sy, x);
   return clamp(c, 0.0, PI);
-}
-
-/* relight/sphere_shadow.py: cap_visibility's blocked part (1 - visibility) */
-float relight_lamp_blocked(vec3 p, vec3 lamp_pos, float lamp_radius, vec3 c, float r)
-{
-  vec3 to_l = lamp_pos - p;
-  vec3 to_c = c - p;
-  float d_l = max(length(to_l), 1e-12);
-  float d_c = max(length(to_c), 1e-12);
-  if (d_c < r) {
-    return 1.0;
-  }
-  if (d_c >= d_l) {
-    return 0.0;
-  }
-  /* the angle between the axes, as atan(|a x b|, a.b): acos loses float32 precision near 0 */
-  vec3 ul = to_l / d_l;
-  vec3 uc = to_c / d_c;
-  float gamma = atan(length(cross(ul, uc)), dot(ul, uc));
-  float s_l = min(lamp_radius / d_l, 1.0);
-  float s_o = min(r / d_c, 1.0);
-  float th_l = asin(s_l);
-  float th_o = asin(s_o);
-  float om_l = s_l * s_l / (1.0 + sqrt(max(1.0 - s_l * s_l, 0.0)));
-  float om_o = s_o * s_o / (1.0 + sqrt(max(1.0 - s_o * s_o, 0.0)));
-  float width = max(2.0 * min(th_l, th_o), EPS_ANGLE);
-  float t = clamp((th_l + th_o - gamma) / width, 0.0, 1.0);
-  return clamp(min(om_o / max(om_l, 1e-30), 1.0) * t * t * (3.0 - 2.0 * t), 0.0, 1.0);
 }
 
 /* env_shadow.py: cap_filter.sample_cap_filtered at visible_cap + cosine_centroid */

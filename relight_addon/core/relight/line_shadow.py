@@ -164,7 +164,7 @@ def line_visibility(table, basis_img, centre, radius, points, targets, start=1e-
     row = tile[..., 1].astype(int)
     e1 = basis_img[row, col]
     e2 = basis_img[row, n_dir + col]
-    w = c - q + dv                                            # c - p, from the target
+    w = c - p
     tc = np.sum(w * u, axis=-1)                               # the centre's foot on the ray
     o = tc[..., None] * u - w                                 # the foot, from the centre
     st = np.stack([np.sum(o * e1, -1), np.sum(o * e2, -1)], -1)     # texels from the middle

@@ -132,21 +132,27 @@ def may_shadow(points, lamp_pos, lamp_radius, bound):
     centre, sin beta = (R + r) / D, D their distance (a line meets both balls only inside
     it).  Everything passes where the two balls meet.  Every quantity but p - S is the same
     for every point, so a material computes them once (Cycles folds them into constants):
-    eight nodes a point and lamp.  Some points pass needlessly (between S and the object, off
-    its penumbra; behind the lamp): only render time."""
+    nine nodes a point and lamp.  Some points pass needlessly (between S and the object, off
+    its penumbra; behind the lamp): only render time.  The lamp's radius is grown by the
+    point lamp's smallest cap (lamp_cap's EPS_ANGLE / 2) seen from twice its distance to the
+    bound's far side: a point lamp's spheres' penumbra (under a millimetre wide) beyond that is
+    cut, nothing else."""
     p = np.asarray(points, float)
     lamp = np.asarray(lamp_pos, float)
     centre, big = np.asarray(bound[0], float), float(bound[1])
-    r = max(float(lamp_radius), 0.0)
     cl = centre - lamp
     dist = float(np.linalg.norm(cl))
+    # lamp_cap gives a point lamp a cap of EPS_ANGLE / 2 (a penumbra that thin): a ball of that
+    # angle seen from twice the lamp's distance to the bound's far side holds it there
+    r = max(float(lamp_radius), 0.0) + 2.0 * (dist + big) * np.sin(0.5 * EPS_ANGLE)
     both = big + r
     if dist <= both:
         return np.ones(p.shape[:-1], bool)
     c = cl / dist
-    apex = lamp + c * (dist * r / both)
-    e = p - apex
-    along = e @ c
+    # p - S from p - centre (S = centre - c D R / (R + r)): a sun's S is 1e5 m away, and the
+    # difference of two such points keeps few digits in float32 (the materials' nodes)
+    e = p - centre
+    along = e @ c + dist * big / both
     across = np.linalg.norm(np.cross(e, c), axis=-1)
     return across < np.abs(along) * (both / np.sqrt(dist * dist - both * both))
 
