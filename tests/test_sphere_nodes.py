@@ -652,6 +652,13 @@ def test_defaults_keep_no_sphere_in_the_materials_and_the_spheres_in_the_file(tm
     ray = next(g for g in bpy.data.node_groups if g.get(rs.RAY_OBJECT_KEY) == "Monkey")
     assert rs.current_kind(ray)
     assert any(n.bl_idname == "ShaderNodeRaycast" for n in ray.nodes) == rs.available()
+    # Cycles on the spheres: the reach holds the spheres' bound only (fewer points pay them)
+    bpy.context.scene.relight.cycles_shadows = "SPHERES"
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    reach = bpy.data.node_groups["Relight Reach Monkey"]
+    bpy.context.view_layer.update()
+    smaller = next(n.outputs[0].default_value for n in reach.nodes if n.label == "Bound radius")
+    assert abs(smaller - sphere_r * max(bpy.data.objects["Monkey"].scale)) < 1e-4
 
 
 def test_a_lamp_added_after_a_moving_object_is_shadowed_by_it():

@@ -102,7 +102,11 @@ def make_ray_group(obj, tris, key):
     d = b.vmath("SUBTRACT", gin.outputs["Target"], p)
     length = b.vmath("LENGTH", d)
     u = b.vmath("NORMALIZE", d)
-    q = b.vmath("SUBTRACT", c_w.outputs[0], p)
+    # the centre from the point, made to depend on the target (by a term far below float32's
+    # reach): Cycles merges identical nodes, and one the lamps' groups shared would be
+    # evaluated outside their branches, at every point
+    q = b.vmath("SUBTRACT", c_w.outputs[0],
+                b.vmath("MULTIPLY_ADD", gin.outputs["Target"], (1e-30,) * 3, c=p))
     b.column()
     tc = b.vmath("DOT_PRODUCT", q, u)                     # the centre's foot on the ray
     h2 = b.math("MULTIPLY_ADD", tc, b.math("MULTIPLY", tc, -1.0), b.vmath("DOT_PRODUCT", q, q))

@@ -67,6 +67,7 @@ from .write import MAP_PREFIX, SHADOW_PREFIX, T_NODE
 LAMP_KEY = "relight_lamp"              # on a lamp group: the lamp's name (as in the maps)
 OBJECT_KEY = "relight_sphere_object"   # on a sphere group: the object's name
 REACH_KEY = "relight_reach_object"     # on a reach group: the object's name
+REACH_MESH_KEY = "relight_reach_mesh"   # on a reach group: 1 when its bound holds the mesh's
 FIT_KEY = "relight_sphere_fit"         # on a sphere group: hash of the mesh and sphere count
 SPHERES_KEY = "relight_spheres"        # on a sphere group: x, y, z, radius per sphere (own frame)
 HULL_KEY = "relight_sphere_hull"       # on a sphere group: x, y, z, radius of the silhouette sphere
@@ -279,10 +280,20 @@ def cap_group(key, tree_type="ShaderNodeTree"):
     return ng
 
 
-def make_reach_group(obj, bound, key, fit_hash=""):
+def reach_bound(bound, mesh=None):
+    """(centre, radius): the spheres' ``bound``, grown to hold ``mesh`` = (centre, radius) too
+    (the mesh's own bound, which the rays meet) when given."""
+    if mesh is None:
+        return bound
+    gap = float(np.linalg.norm(np.asarray(mesh[0], float) - np.asarray(bound[0], float)))
+    return bound[0], max(float(bound[1]), gap + float(mesh[1]))
+
+
+def make_reach_group(obj, bound, key, fit_hash="", holds_mesh=False):
     """The node group "Relight Reach <object>": inputs Position, Lamp and Lamp Radius (world),
     output Reach, 1 where some sphere inside ``bound`` (the object's frame) can hide a part of
-    the lamp, 0 where the spheres' visibility is exactly 1 (sphere_shadow.may_shadow).  Its own
+    the lamp, 0 where the spheres' visibility is exactly 1 (sphere_shadow.may_shadow);
+    ``holds_mesh``: the bound holds the mesh's too (reach_bound), which Cycles' rays meet.  Its own
     group, so that a material whose lamps need no sphere (Cycles' rays, EEVEE's shadow maps)
     holds none: Cycles reads every node of a material's tree before it drops the unused ones
     (measured: 32 spheres, two lamps, nine materials: +0.09 s a frame)."""
@@ -295,6 +306,7 @@ def make_reach_group(obj, bound, key, fit_hash=""):
                                [("Reach", "NodeSocketFloat")], key)
     ng[REACH_KEY] = obj.name
     ng[FIT_KEY] = fit_hash
+    ng[REACH_MESH_KEY] = int(bool(holds_mesh))
     b = Builder(ng)
     tree = ng.nodes
     # Reach, in world space (so that points out of reach never pay the transform below): the
@@ -371,11 +383,7 @@ def make_sphere_group(obj, centres, radii, key, fit_hash="", hull=None, mesh=Non
     ng[BOUND_KEY] = [*map(float, bound[0]), float(bound[1])]
     if hull is not None:
         ng[HULL_KEY] = [*map(float, hull[0]), float(hull[1])]
-    reach = bound
-    if mesh is not None:
-        gap = float(np.linalg.norm(np.asarray(mesh[0], float) - bound[0]))
-        reach = (bound[0], max(float(bound[1]), gap + float(mesh[1])))
-    make_reach_group(obj, reach, key, fit_hash)
+    make_reach_group(obj, reach_bound(bound, mesh), key, fit_hash, mesh is not None)
     b = Builder(ng)
     tree = ng.nodes
     local = local_frame(b, obj)
@@ -982,15 +990,21 @@ def sync(scene, depsgraph=None, seed=0, result=None, settle_shadows=True, cull=T
                 rg = ray_shadow.make_ray_group(obj, tris, key)
                 rg[FIT_KEY] = h
             rays_wanted.append(rg)
+        # the reach holds the mesh's bound where Cycles' rays meet the mesh; the spheres' alone
+        # (a smaller reach: fewer points pay the spheres) where Cycles shows the spheres
+        mesh = ray_shadow.mesh_bound(tris) if use_rays else None
         old = groups.pop(obj.name, None)
-        if old is not None and old.get(FIT_KEY) == h and reach_group(key, obj.name) is not None:
+        if old is not None and old.get(FIT_KEY) == h:
+            reach = reach_group(key, obj.name)
+            if reach is None or bool(reach.get(REACH_MESH_KEY)) != use_rays:
+                make_reach_group(obj, reach_bound(group_bound(old), mesh), key, h, use_rays)
             wanted.append(old)
             continue
         if old is not None:
             remove_sphere_group(old)
         centres, radii = fit_spheres(tris, n, seed)
         wanted.append(make_sphere_group(obj, centres, radii, key, h, silhouette_sphere(tris),
-                                        ray_shadow.mesh_bound(tris)))
+                                        mesh))
         fitted += 1
     for stale in groups.values():
         remove_sphere_group(stale)
