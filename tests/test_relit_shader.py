@@ -137,6 +137,20 @@ def test_shader_draws_its_numpy_twin():
     objects2 = _objects((0.3, 0.2, 0.0))[:1]
     img2 = draw(relit.pack_uniforms(lamps, scales2, objects2))
     assert np.abs(img2[..., :3] - twin(scales2, objects2)[0]).mean() < 1e-4
+    # a lamp with no place (radius < 0): that lamp unshadowed, the other still shadowed
+    lamps_np = [lamps[0], (lamps[1][0], -1.0)]
+    u4 = relit.pack_uniforms(lamps_np, scales, objects)
+    t4 = bilinear(t_img, u * 6, v * 6)[:, :3]
+    m4 = np.stack([bilinear(maps[k], u * 6, v * 6) for k in range(2)])
+    vis4 = np.stack([relit.lamp_visibility(P, p, r, objects) for p, r in lamps_np])
+    assert (vis4[1] == 1.0).all() and vis4[0].min() < 0.2
+    want4 = relit.relit_colour(t4, m4, scales, vis4).reshape(size, size, 3)
+    assert np.abs(draw(u4)[..., :3] - want4).mean() < 1e-4
+    # whole objects only: one that does not fit the sphere slots is left out, not cut
+    big = [(np.zeros((relit.MAX_SPHERES - 3, 3)), np.full(relit.MAX_SPHERES - 3, 0.1), None),
+           objects[0]]
+    packed = relit.pack_uniforms(lamps, scales, big)
+    assert packed["n_objects"] == 1 and packed["object_end"][0] == relit.MAX_SPHERES - 3
     # no object: the relit colour without shadow, the maps' sum
     img3 = draw(relit.pack_uniforms(lamps, scales, []))
     t_only, _ = twin(scales, [])

@@ -27,7 +27,8 @@ import numpy as np
 from ..core.display.relit import MAX_LAMPS, pack_uniforms
 from . import draw_handlers, ids
 
-cache = {"handle": None, "shader": None, "batches": {}, "textures": {}, "failed": None}
+cache = {"handle": None, "shader": None, "batches": {}, "textures": {}, "failed": None,
+         "last_texture_key": None}
 
 
 def material_inputs(mat):
@@ -91,11 +92,13 @@ def moving_spheres(scene, key):
     return out
 
 
-def relit_slots(scene, key):
-    """[(object, slot index, material)] of the scene's shown meshes' relit material slots."""
+def relit_slots(scene, key, view=None):
+    """[(object, slot index, material)] of the scene's shown meshes' relit material slots
+    (``view``: a 3D View space, whose local view counts)."""
     out = []
     for obj in scene.objects:
-        if obj.type != "MESH" or not obj.visible_get():
+        if obj.type != "MESH" or not (obj.visible_get(viewport=view) if view is not None
+                                      else obj.visible_get()):
             continue
         for i, slot in enumerate(obj.material_slots):
             if slot.material is not None and ids.ours(slot.material, key):
@@ -103,20 +106,22 @@ def relit_slots(scene, key):
     return out
 
 
-def frame_data(scene):
+def frame_data(scene, view=None):
     """One frame's draws: [(object name, slot index, material name, pack_uniforms dict)], or []
-    when the scene has no relit material."""
+    when the scene has no relit material.  A material without a map is not drawn (Solid
+    shading shows through); a lamp without its lamp group (no place to shadow from) is drawn
+    unshadowed (radius -1)."""
     key = ids.scene_key(scene)
     if key is None:
         return []
     places = lamp_places(key)
     objects = moving_spheres(scene, key)
     out = []
-    for obj, i, mat in relit_slots(scene, key):
+    for obj, i, mat in relit_slots(scene, key, view):
         inputs = material_inputs(mat)
-        if inputs is None:
+        if inputs is None or not inputs["lamps"]:
             continue
-        lamps = [places.get(name, (np.zeros(3), 0.0)) for name, _, _ in inputs["lamps"]]
+        lamps = [places.get(name, (np.zeros(3), -1.0)) for name, _, _ in inputs["lamps"]]
         scales = [s for _, _, s in inputs["lamps"]]
         out.append((obj.name, i, mat.name, pack_uniforms(lamps, scales, objects)))
     return out
@@ -170,7 +175,10 @@ def _textures(inputs):
     """(T texture, maps array texture) of a material's images, cached by the images' identity
     (an Update writes new images)."""
     import gpu
-    key = (inputs["t"].as_pointer(), tuple(img.as_pointer() for _, img, _ in inputs["lamps"]))
+    from .images import CONTENT
+    key = tuple((img.name, img.get(CONTENT), tuple(img.size))
+                for img in [inputs["t"], *(im for _, im, _ in inputs["lamps"])])
+    cache["last_texture_key"] = key
     if key in cache["textures"]:
         return cache["textures"][key]
     t = _pixels(inputs["t"])
@@ -216,7 +224,7 @@ def draw_frame(context=None):
             or context.region_data is None or getattr(space, "shading", None) is None
             or space.shading.type != "SOLID"):
         return
-    draws = frame_data(scene)
+    draws = frame_data(scene, space)
     if not draws:
         return
     if cache["shader"] is None:
@@ -224,7 +232,7 @@ def draw_frame(context=None):
     shader = cache["shader"]
     depsgraph = context.evaluated_depsgraph_get()
     gpu.state.depth_test_set("LESS_EQUAL")
-    used = set()
+    used, used_textures = set(), set()
     try:
         shader.bind()
         shader.uniform_float("ModelViewProjectionMatrix", context.region_data.perspective_matrix)
@@ -241,6 +249,7 @@ def draw_frame(context=None):
                 cache["batches"][(name, slot)] = batch
             used.add((name, slot))
             t_tex, m_tex = _textures(inputs)
+            used_textures.add(cache["last_texture_key"])
             shader.uniform_sampler("t_image", t_tex)
             shader.uniform_sampler("maps", m_tex)
             _set_uniforms(shader, u)
@@ -250,8 +259,8 @@ def draw_frame(context=None):
     # what no longer draws (a deleted object, images an Update replaced) is let go
     for k in [k for k in cache["batches"] if k not in used]:
         del cache["batches"][k]
-    if len(cache["textures"]) > 4 * max(len(used), 1):
-        cache["textures"].clear()
+    for k in [k for k in cache["textures"] if k not in used_textures]:
+        del cache["textures"][k]
 
 
 def is_registered():

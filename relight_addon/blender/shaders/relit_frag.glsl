@@ -7,7 +7,8 @@
  *   in  vec3 v_pos;  in vec2 v_uv;         surface point (world) and texture coordinates
  *   uniform sampler2D      t_image;        T, the shadow-free texture
  *   uniform sampler2DArray maps;           layer l: lamp l's map (rgb), alpha its direct part
- *   uniform vec4 lamps[MAX_LAMPS];         xyz lamp position, w its radius (world)
+ *   uniform vec4 lamps[MAX_LAMPS];         xyz lamp position, w its radius (world; < 0: a
+ *                                          lamp with no place, drawn unshadowed)
  *   uniform vec4 lamp_scale[MAX_LAMPS];    rgb the lamp's present scale (power and colour)
  *   uniform int  n_lamps;
  *   uniform vec4 spheres[MAX_SPHERES];     xyz centre, w radius, of every moving object
@@ -67,7 +68,7 @@ void main()
     vec4 m = texture(maps, vec3(v_uv, float(l)));
     float v = 1.0;
     int first = 0;
-    for (int k = 0; k < n_objects; k++) {
+    for (int k = 0; k < n_objects && lamps[l].w >= 0.0; k++) {
       if (object_end[k] > first && relight_may_shadow(v_pos, lamps[l], bounds[k])) {
         v *= relight_object_visibility(v_pos, lamps[l], hulls[k], first, object_end[k]);
       }

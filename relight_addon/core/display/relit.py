@@ -28,6 +28,8 @@ def lamp_visibility(points, lamp_pos, lamp_radius, objects):
     """V (n,) of one lamp from ``points`` (n, 3) past ``objects``: [(centres (m, 3), radii (m,),
     hull (centre, radius) or None)], world space."""
     v = np.ones(len(points))
+    if lamp_radius < 0:                   # a lamp with no place: unshadowed
+        return v
     for centres, radii, hull in objects:
         if len(radii):
             v = v * sphere_visibility(points, lamp_pos, lamp_radius, centres, radii, hull)
@@ -45,8 +47,8 @@ def relit_colour(t_rgb, maps, scales, visibility):
 
 def pack_uniforms(lamps, scales, objects):
     """The shader's uniforms: ``lamps`` [(position (3,), radius)], ``scales`` [(3,)] (at most
-    MAX_LAMPS), ``objects`` as lamp_visibility's (at most MAX_OBJECTS and MAX_SPHERES in all;
-    the rest dropped).  Arrays padded to their GLSL sizes, float32."""
+    MAX_LAMPS; a radius < 0: no shadow), ``objects`` as lamp_visibility's (at most MAX_OBJECTS,
+    and whole objects up to MAX_SPHERES spheres in all; the rest dropped).  Arrays padded to their GLSL sizes, float32."""
     lamps, scales = list(lamps)[:MAX_LAMPS], list(scales)[:MAX_LAMPS]
     lamp = np.zeros((MAX_LAMPS, 4), np.float32)
     scale = np.zeros((MAX_LAMPS, 4), np.float32)
@@ -59,7 +61,9 @@ def pack_uniforms(lamps, scales, objects):
     ends = np.zeros(MAX_OBJECTS, np.int32)
     n = k = 0
     for centres, radii, hull in list(objects)[:MAX_OBJECTS]:
-        m = min(len(radii), MAX_SPHERES - n)
+        if n + len(radii) > MAX_SPHERES:      # a whole object or none (a part: half a shadow)
+            continue
+        m = len(radii)
         spheres[n:n + m, :3] = np.asarray(centres, float)[:m]
         spheres[n:n + m, 3] = np.asarray(radii, float)[:m]
         n += m
