@@ -40,9 +40,19 @@ OVERLAY_ITEMS = (
 
 @persistent
 def _forget_all(*_args):
+    from ..relight_addon.blender import ar_draw, relit_draw
+    ar_draw.retry()         # another file: what failed to draw in the last one may draw here
+    relit_draw.retry()
     if not bpy.app.background:
         from ..relight_addon.blender import overlay
         overlay.unregister_overlay()
+
+
+def _relit_preview_toggled(settings, context):
+    """Toggling the preview draws it again after a failure (a failure stops the drawing, so
+    that the console is not flooded at every redraw)."""
+    from ..relight_addon.blender import relit_draw
+    relit_draw.retry()
 
 
 def update_overlay(settings, context):
@@ -85,7 +95,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                                      "where they stand; the materials use them until an "
                                      "object moves (then its spheres' shadow)")
     relit_preview: BoolProperty(
-        name="Relit Preview in Solid", default=False,
+        name="Relit Preview in Solid", default=False, update=_relit_preview_toggled,
         description="In Solid viewport shading, draw the relit surfaces as the relit materials "
                     "show them, with the moving objects' sphere shadows, live while they move "
                     "(nothing to compile; Material Preview and Rendered show the materials "

@@ -23,6 +23,11 @@ def _state():
     return state
 
 
+def _relit_draw():
+    from ..relight_addon.blender import relit_draw
+    return relit_draw
+
+
 def _wrap(layout, text, width, icon='NONE'):
     """``text`` as lines of at most ``width`` characters, the first with ``icon``."""
     col = layout.column(align=True)
@@ -220,6 +225,10 @@ class RELIGHT_PT_virtual(_RelightPanel, bpy.types.Panel):
             layout.prop(settings, "eevee_shadows")
             layout.prop(settings, "cycles_shadows")
             layout.prop(settings, "relit_preview")
+            stopped = _relit_draw().failure() if settings.relit_preview else None
+            if stopped:
+                _wrap(layout, f"The preview stopped ({stopped}); switch it off and on to try "
+                              "again", _width(context), 'ERROR')
         layout.operator("relight.eevee_light", icon='LIGHTPROBE_VOLUME')
 
 

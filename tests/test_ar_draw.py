@@ -20,6 +20,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from helpers import ar as A  # noqa: E402
+from helpers.fake_gpu import FakeGpu  # noqa: E402
 
 
 # AR mode writes Blender 5.0's compositor (relight_addon/blender/ar.py AR_MIN_BLENDER); on the
@@ -126,117 +127,6 @@ def test_the_handler_draws_the_twin_and_follows_a_move(tmp_path):
         assert d.max() < 1e-2 and d.mean() < 2e-4, (d.max(), d.mean())
 
 
-class _FakeGpu:
-    """Stands in for Blender's gpu module (unavailable in background mode) with the signatures
-    of its documentation, checking what the handler declares and sends: uniform names and
-    sizes against the create-info, buffer lengths, texture sizes, batch attributes."""
-
-    def __init__(self):
-        import types
-        self.log = []
-        self.created = 0
-        fake = self
-
-        class Info:
-            def __init__(self):
-                self.inputs, self.constants, self.samplers = {}, {}, {}
-
-            def vertex_in(self, slot, typ, name):
-                self.inputs[name] = typ
-
-            def push_constant(self, typ, name, size=0):
-                self.constants[name] = (typ, size)
-
-            def sampler(self, slot, typ, name):
-                self.samplers[name] = typ
-
-            def vertex_out(self, iface):
-                pass
-
-            def fragment_out(self, slot, typ, name):
-                pass
-
-            def vertex_source(self, src):
-                assert "void main" in src
-
-            fragment_source = vertex_source
-
-        class Iface:
-            def __init__(self, name):
-                pass
-
-            def smooth(self, typ, name):
-                pass
-
-        class Shader:
-            def __init__(self, info):
-                self.info = info
-                self.names = list(info.constants)
-                self.values = {}
-
-            def bind(self):
-                fake.log.append("bind")
-
-            def uniform_float(self, name, value):
-                typ, size = self.info.constants[name]
-                want = {"FLOAT": 1, "VEC4": 4, "MAT4": 16}[typ]
-                n = len(np.ravel(np.asarray(value, float)))
-                assert size == 0 and n == want, (name, n, want)
-                self.values[name] = np.ravel(np.asarray(value, float))
-
-            def uniform_int(self, name, value):
-                assert self.info.constants[name] == ("INT", 0) and isinstance(value, int)
-                self.values[name] = value
-
-            def uniform_sampler(self, name, tex):
-                assert name in self.info.samplers
-                assert (self.info.samplers[name] == "FLOAT_2D_ARRAY") == (tex.layers > 0)
-                self.values[name] = tex
-
-            def uniform_from_name(self, name):
-                return self.names.index(name)
-
-            def uniform_vector_float(self, location, buffer, length, count):
-                name = self.names[location]
-                typ, size = self.info.constants[name]
-                assert {"FLOAT": 1, "VEC4": 4}[typ] == length and size == count, name
-                assert len(buffer.data) == length * count
-                self.values[name] = np.asarray(buffer.data).reshape(count, length)
-
-        class Buffer:
-            def __init__(self, fmt, size, data):
-                assert fmt == "FLOAT" and len(data) == size
-                self.data = list(data)
-
-        class Texture:
-            def __init__(self, size, layers=0, is_cubemap=False, format="RGBA8", data=None):
-                w, h = size
-                assert format == "RGBA32F" and len(data.data) == w * h * max(layers, 1) * 4
-                self.size, self.layers = size, layers
-
-        def create_from_info(info):
-            fake.created += 1
-            return Shader(info)
-
-        def batch_for_shader(shader, kind, content):
-            assert kind == "TRIS" and set(content) == set(shader.info.inputs)
-            n = {len(v) for v in content.values()}
-            assert len(n) == 1 and n.pop() % 3 == 0
-            fake.log.append("batch")
-            return types.SimpleNamespace(draw=lambda sh: fake.log.append(
-                ("draw", np.array(sh.values["spheres"]))))
-
-        state = types.SimpleNamespace(
-            blend_set=lambda m: self.log.append(("blend", m)),
-            depth_test_set=lambda m: self.log.append(("depth", m)),
-            depth_mask_set=lambda m: self.log.append(("mask", m)))
-        self.gpu = types.SimpleNamespace(
-            types=types.SimpleNamespace(GPUShaderCreateInfo=Info, GPUStageInterfaceInfo=Iface,
-                                        Buffer=Buffer, GPUTexture=Texture),
-            shader=types.SimpleNamespace(create_from_info=create_from_info), state=state)
-        self.batch = types.SimpleNamespace(batch_for_shader=batch_for_shader)
-
-
 def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
     """The draw callback's frame, run against a stand-in of the gpu module: one shader built
     once, the receivers' batch once, one multiplicative draw per object whose spheres are the
@@ -247,7 +137,7 @@ def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
     sc, ob = A.build(tmp_path)
     assert bpy.ops.relight.ar_setup() == {"FINISHED"}
     ar_draw, ar_nodes, ids = (A.ar_module(n) for n in ("ar_draw", "ar_nodes", "ids"))
-    fake = _FakeGpu()
+    fake = FakeGpu()
     monkeypatch.setitem(sys.modules, "gpu", fake.gpu)
     monkeypatch.setitem(sys.modules, "gpu_extras.batch", fake.batch)
     monkeypatch.setitem(ar_draw.cache, "shader", None)
@@ -262,10 +152,32 @@ def test_the_handler_frame_with_a_stand_in_gpu(tmp_path, monkeypatch):
         bpy.context.view_layer.update()
         fake.log.clear()
         ar_draw.draw_frame(ctx)
-        draws = [e for e in fake.log if isinstance(e, tuple) and e[0] == "draw"]
+        draws = fake.draws()
         assert len(draws) == 1
         centres, radii = _expected_spheres(ob, group)
-        assert np.abs(draws[0][1][:len(centres), :3] - centres).max() < 1e-5
+        assert np.abs(draws[0]["spheres"][:len(centres), :3] - centres).max() < 1e-5
         blends = [e[1] for e in fake.log if isinstance(e, tuple) and e[0] == "blend"]
         assert blends == ["MULTIPLY", "NONE"]
     assert fake.created == 1 and sum(e == "batch" for e in fake.log) == 0   # built once
+    # moving a receiver's vertex changes no count: the batch is made again from its geometry's
+    # update, and only then
+    dh = A.ar_module("draw_handlers")
+    receiver = sc.objects[ar_draw._ar_state(sc)["receivers"][0]]
+    with dh.watching():
+        receiver.data.vertices[0].co.z += 1e-3
+        receiver.data.update()
+        bpy.context.view_layer.update()
+        for rebuilt in (1, 0):
+            fake.log.clear()
+            ar_draw.draw_frame(ctx)
+            assert sum(e == "batch" for e in fake.log) == rebuilt
+    # a failure stops the drawing; Update (new data) draws again, from a new batch
+    callback = dh.guarded(ar_draw.cache, lambda: ar_draw.draw_frame(ctx), "the test's shadows")
+    monkeypatch.setitem(ar_draw.cache, "failed", "RuntimeError: a test's failure")
+    fake.log.clear()
+    callback()
+    assert fake.log == []
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert ar_draw.cache["failed"] is None
+    callback()
+    assert "batch" in fake.log and len(fake.draws()) == 1

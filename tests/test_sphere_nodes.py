@@ -279,6 +279,121 @@ def test_relit_preview_draws_what_the_material_shows(room):
         bpy.context.view_layer.update()
 
 
+def test_relit_preview_follows_edits_and_retries(room):
+    """What the preview's batches depend on beyond the transform (draw_handlers.geometry_key):
+    unchanged by a move, changed by an edit that moves a vertex (no count changes) and by a
+    keyframed shape key at a new frame (animation runs no depsgraph_update_post); a failure
+    stops the preview until the setting is toggled."""
+    rd = importlib.import_module(PKG + ".relight_addon.blender.relit_draw")
+    dh = importlib.import_module(PKG + ".relight_addon.blender.draw_handlers")
+    scene = bpy.context.scene
+    me = bpy.data.meshes.new("edit probe")
+    me.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [(0, 1, 2)])
+    probe = bpy.data.objects.new("edit probe", me)
+    scene.collection.objects.link(probe)
+    frame = scene.frame_current
+    try:
+        with dh.watching():
+            bpy.context.view_layer.update()
+            first = dh.geometry_key(probe)
+            probe.location.x += 0.5
+            bpy.context.view_layer.update()
+            assert dh.geometry_key(probe) == first                  # a move: uniforms only
+            me.vertices[0].co.z += 1e-3
+            me.update()
+            bpy.context.view_layer.update()
+            edited = dh.geometry_key(probe)
+            assert edited != first
+            probe.shape_key_add(name="Basis")
+            key = probe.shape_key_add(name="Lift")
+            key.data[1].co.z = 0.3
+            key.value = 0.0
+            key.keyframe_insert("value", frame=frame)
+            key.value = 1.0
+            key.keyframe_insert("value", frame=frame + 10)
+            bpy.context.view_layer.update()
+            keyed = dh.geometry_key(probe)
+            scene.frame_set(frame + 10)
+            assert dh.geometry_key(probe) != keyed
+    finally:
+        scene.frame_set(frame)
+        bpy.data.objects.remove(probe)
+        bpy.data.meshes.remove(me)
+    rd.cache["failed"] = "RuntimeError: a test's failure"
+    was = scene.relight.relit_preview
+    try:
+        assert rd.failure()
+        scene.relight.relit_preview = not was
+        assert rd.failure() is None
+    finally:
+        scene.relight.relit_preview = was
+        rd.cache["failed"] = None
+
+
+def test_relit_preview_frame_with_a_stand_in_gpu(room, monkeypatch):
+    """The preview's frame against a stand-in of the gpu module (tests/helpers/fake_gpu.py:
+    Blender's checks of dtypes, lengths and attribute widths): one draw per relit slot with
+    faces, each with its slot's lamps and Suzanne's spheres, textures sampled as the material's
+    T node interpolates; a slot of the relit material with no face draws nothing (and stops
+    nothing); after a failure the toggled setting draws again."""
+    from types import SimpleNamespace
+
+    from mathutils import Matrix
+
+    from helpers.fake_gpu import FakeGpu
+    rd = importlib.import_module(PKG + ".relight_addon.blender.relit_draw")
+    dh = importlib.import_module(PKG + ".relight_addon.blender.draw_handlers")
+    scene = bpy.context.scene
+    fake = FakeGpu()
+    monkeypatch.setitem(sys.modules, "gpu", fake.gpu)
+    monkeypatch.setitem(sys.modules, "gpu_extras.batch", fake.batch)
+    for k, v in (("shader", None), ("batches", {}), ("textures", {}), ("failed", None)):
+        monkeypatch.setitem(rd.cache, k, v)
+    frame_data = rd.frame_data       # a stand-in space has no local view to ask
+    monkeypatch.setattr(rd, "frame_data", lambda sc, view=None: frame_data(sc))
+    was = scene.relight.relit_preview
+    scene.relight.relit_preview = True
+    ctx = SimpleNamespace(scene=scene, space_data=SimpleNamespace(
+        shading=SimpleNamespace(type="SOLID")), region_data=SimpleNamespace(
+        perspective_matrix=Matrix.Identity(4)),
+        evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
+    floor = bpy.data.objects["Floor"]
+    floor.data.materials.append(floor.material_slots[0].material)       # a slot no face uses
+    try:
+        bpy.context.view_layer.update()
+        expected = frame_data(scene)
+        assert any(n == "Floor" and i == 1 for n, i, _, _ in expected)
+        callback = dh.guarded(rd.cache, lambda: rd.draw_frame(ctx), "the test's preview")
+        callback()
+        assert rd.cache["failed"] is None
+        draws = fake.draws()
+        assert fake.created == 1 and len(draws) == len(expected) - 1
+        by_lamps = {int(u["n_lamps"]) for _, _, _, u in expected}
+        assert {int(d["n_lamps"]) for d in draws} == by_lamps
+        floor_u = next(u for n, i, _, u in expected if (n, i) == ("Floor", 0))
+        assert any(np.allclose(d["lamps"], floor_u["lamps"]) and
+                   np.allclose(d["spheres"], floor_u["spheres"]) for d in draws)
+        interp = {rd.material_inputs(bpy.data.materials[m])["filter"] for _, _, m, _ in expected}
+        assert {t.filter for t in fake.textures} == interp
+        # once the batches are made, a frame makes none
+        fake.log.clear()
+        callback()
+        assert "batch" not in fake.log and len(fake.draws()) == len(draws)
+        # a failure stops the preview; toggling the setting draws again
+        rd.cache["failed"] = "RuntimeError: a test's failure"
+        fake.log.clear()
+        callback()
+        assert fake.log == []
+        scene.relight.relit_preview = False
+        scene.relight.relit_preview = True
+        callback()
+        assert "batch" in fake.log and len(fake.draws()) == len(draws)
+    finally:
+        floor.data.materials.pop()
+        scene.relight.relit_preview = was
+        bpy.context.view_layer.update()
+
+
 def test_line_table_group_matches_its_numpy_twin(room):
     """The line-table group (line_nodes.py: what Cycles' rays read where Blender has no Raycast
     node) computes its numpy twin's V (core/relight/line_shadow.line_visibility) on the floor

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import ar_nodes, ar_read, ar_write, ids
+from . import ar_draw, ar_nodes, ar_read, ar_write, ids
 from .images import MapWriter
 from .pipeline import Outcome, PipelineError
 
@@ -276,6 +276,7 @@ def write(context, job, result) -> Outcome:
                f"{len(lights)} light(s) of the environment")
     if changed:
         message += f"; render settings set: {', '.join(changed)}"
+    ar_draw.retry()     # the viewport's shadows draw again from the new data, even after a failure
     summary = {"receivers": len(inp.receivers), "objects": len(inp.objects), "slots": slots,
                "spheres": spheres, "lights": len(lights), "seconds": dict(result.seconds),
                "total_seconds": time.perf_counter() - job.t0}

@@ -33,14 +33,14 @@ def _ar_state(scene):
 
 
 def receiver_key(scene, st):
-    """What the receivers' batch depends on (cheap: names, transforms, vertex counts)."""
+    """What the receivers' batch depends on (cheap: names, transforms, geometry keys)."""
     out = []
     for name in st.get("receivers", ()):
         obj = scene.objects.get(name)
         if obj is None or obj.type != "MESH":
             continue
         out.append((name, tuple(round(x, 6) for row in obj.matrix_world for x in row),
-                    len(obj.data.vertices), len(obj.data.polygons)))
+                    draw_handlers.geometry_key(obj)))
     return tuple(out)
 
 
@@ -125,20 +125,17 @@ def _texture(array, layers=0):
     a = np.asarray(array, np.float32)
     rgba = np.concatenate([a, np.ones(a.shape[:-1] + (1,), np.float32)], axis=-1)
     h, w = rgba.shape[-3], rgba.shape[-2]
-    buf = gpu.types.Buffer("FLOAT", rgba.size, rgba.ravel().tolist())
-    return gpu.types.GPUTexture((w, h), layers=layers, format="RGBA32F", data=buf)
+    return gpu.types.GPUTexture((w, h), layers=layers, format="RGBA32F",
+                                data=draw_handlers.float_buffer(rgba))
 
 
 def _set_uniforms(shader, u):
-    import gpu
     for name, length, count in (("spheres", 4, len(u["spheres"])),
                                 ("light_dir", 4, len(u["light_dir"])),
                                 ("light_rad", 4, len(u["light_rad"])),
                                 ("cap_angles", 1, len(u["cap_angles"]))):
-        data = np.asarray(u[name], np.float32).ravel()
         shader.uniform_vector_float(shader.uniform_from_name(name),
-                                    gpu.types.Buffer("FLOAT", data.size, data.tolist()),
-                                    length, count)
+                                    draw_handlers.float_buffer(u[name]), length, count)
     shader.uniform_int("n_spheres", int(u["n_spheres"]))
     shader.uniform_int("n_lights", int(u["n_lights"]))
     shader.uniform_float("hull", [float(x) for x in u["hull"]])
@@ -167,8 +164,8 @@ def draw_frame(context=None):
         pos, nor = receiver_arrays(scene, st, context.evaluated_depsgraph_get())
         if len(pos) == 0:
             return
-        cache["batch"] = batch_for_shader(shader, "TRIS", {"pos": pos.tolist(),
-                                                            "nor": nor.tolist()})
+        cache["batch"] = batch_for_shader(shader, "TRIS", {"pos": draw_handlers.vertex_array(pos),
+                                                            "nor": draw_handlers.vertex_array(nor)})
         cache["batch_key"] = key
     tables_key = (st.get("env_hash"), st.get("bands"), st.get("rows"))
     if cache["textures"] is None or cache["tables_key"] != tables_key:
@@ -194,6 +191,11 @@ def draw_frame(context=None):
         gpu.state.depth_mask_set(True)
         gpu.state.depth_test_set("NONE")
         gpu.state.blend_set("NONE")
+
+
+def retry():
+    """Draw again after a failure (Set Up or Update wrote new data): from new gpu objects."""
+    draw_handlers.retry(cache, batch=None, batch_key=None, textures=None, tables_key=None)
 
 
 def is_registered():

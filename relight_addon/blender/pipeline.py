@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import eevee_shadow, ids, materials, read, state, write
+from . import eevee_shadow, ids, materials, read, relit_draw, state, write
 
 
 class PipelineError(Exception):
@@ -417,6 +417,7 @@ def finish(context, job, result) -> Outcome:
     from ..core.relight.diagnose import diagnose
     if getattr(job, "kind", None) == "ar":    # AR mode's job writes itself (ar.py)
         return job.write(context, result)
+    relit_draw.retry()      # the preview draws again from what this writes, even after a failure
     scene = context.scene
     report = job.report
     if job.action in ("none", "reapply"):

@@ -31,15 +31,24 @@ cache = {"handle": None, "shader": None, "batches": {}, "textures": {}, "failed"
          "last_texture_key": None}
 
 
+# image node extension -> GPUTexture extend mode
+_EXTEND = {"REPEAT": "REPEAT", "EXTEND": "EXTEND", "CLIP": "CLAMP_TO_BORDER",
+           "MIRROR": "MIRRORED_REPEAT"}
+
+
 def material_inputs(mat):
     """{"t": T's image, "uv": its UV map name ("" the active one), "lamps": [(lamp name, map
-    image, scale (3,))]} of relit material ``mat`` (write.py's nodes), or None."""
+    image, scale (3,))], "filter": whether T is sampled linearly, "extend": the GPUTexture
+    extend mode of its extension} of relit material ``mat`` (write.py's nodes), or None."""
     from .write import MAP_PREFIX, T_NODE
     nt = mat.node_tree
     t = nt.nodes.get(T_NODE) if nt is not None else None
     if t is None or t.image is None:
         return None
     uv = ""
+    # the preview samples as the T node does (the maps' nodes copy its settings)
+    use_filter = t.interpolation != "Closest"
+    extend = _EXTEND.get(t.extension, "REPEAT")
     if t.inputs["Vector"].is_linked:
         src = t.inputs["Vector"].links[0].from_node
         if src.bl_idname == "ShaderNodeUVMap":
@@ -57,7 +66,8 @@ def material_inputs(mat):
         if c_node is not None:
             scale *= np.array([float(c_node.inputs[k].default_value) for k in range(3)])
         lamps.append((name, node.image, scale))
-    return {"t": t.image, "uv": uv, "lamps": lamps[:MAX_LAMPS]}
+    return {"t": t.image, "uv": uv, "lamps": lamps[:MAX_LAMPS], "filter": use_filter,
+            "extend": extend}
 
 
 def lamp_places(key):
@@ -127,6 +137,13 @@ def frame_data(scene, view=None):
     return out
 
 
+def batch_key(obj, slot, uv_name):
+    """What the triangles of ``obj``'s slot ``slot`` drawn with UV map ``uv_name`` depend on:
+    a change of it makes the batch again (its transform, its geometry: draw_handlers)."""
+    return (obj.name, slot, tuple(round(x, 6) for row in obj.matrix_world for x in row),
+            draw_handlers.geometry_key(obj), uv_name)
+
+
 def mesh_arrays(obj, slot, uv_name, depsgraph):
     """(positions (3 t, 3), uvs (3 t, 2)) float32 of ``obj``'s evaluated triangles of material
     slot ``slot``, world space, with UV map ``uv_name`` ("" the active render one)."""
@@ -173,11 +190,12 @@ def _pixels(img):
 
 def _textures(inputs):
     """(T texture, maps array texture) of a material's images, cached by the images' identity
-    (an Update writes new images)."""
+    (an Update writes new images), sampled as the material's image nodes interpolate them."""
     import gpu
     from .images import CONTENT
     key = tuple((img.name, img.get(CONTENT), tuple(img.size))
                 for img in [inputs["t"], *(im for _, im, _ in inputs["lamps"])])
+    key += (inputs["filter"], inputs["extend"])
     cache["last_texture_key"] = key
     if key in cache["textures"]:
         return cache["textures"][key]
@@ -186,26 +204,26 @@ def _textures(inputs):
     layers = [_pixels(img) for _, img, _ in inputs["lamps"]] or [np.zeros((h, w, 4), np.float32)]
     shape = layers[0].shape
     stack = np.stack([x if x.shape == shape else np.zeros(shape, np.float32) for x in layers])
-    t_tex = gpu.types.GPUTexture((w, h), format="RGBA32F",
-                                 data=gpu.types.Buffer("FLOAT", t.size, t.ravel().tolist()))
+    t_tex = gpu.types.GPUTexture((w, h), format="RGBA32F", data=draw_handlers.float_buffer(t))
     m_tex = gpu.types.GPUTexture((shape[1], shape[0]), layers=len(stack), format="RGBA32F",
-                                 data=gpu.types.Buffer("FLOAT", stack.size,
-                                                       stack.ravel().tolist()))
+                                 data=draw_handlers.float_buffer(stack))
+    for tex in (t_tex, m_tex):
+        if hasattr(tex, "filter_mode"):     # Blender 5.0+ (4.5's keep their default sampling)
+            tex.filter_mode(inputs["filter"])
+            tex.extend_mode(inputs["extend"])
     cache["textures"][key] = (t_tex, m_tex)
     return t_tex, m_tex
 
 
 def _set_uniforms(shader, u):
-    import gpu
     for name, count in (("lamps", len(u["lamps"])), ("lamp_scale", len(u["lamp_scale"])),
                         ("spheres", len(u["spheres"])), ("hulls", len(u["hulls"])),
                         ("bounds", len(u["bounds"]))):
-        data = np.asarray(u[name], np.float32).ravel()
         shader.uniform_vector_float(shader.uniform_from_name(name),
-                                    gpu.types.Buffer("FLOAT", data.size, data.tolist()), 4, count)
+                                    draw_handlers.float_buffer(u[name]), 4, count)
     ends = np.asarray(u["object_end"], np.int32)
     shader.uniform_vector_int(shader.uniform_from_name("object_end"),
-                              gpu.types.Buffer("INT", ends.size, ends.tolist()), 1, ends.size)
+                              draw_handlers.int_buffer(ends), 1, ends.size)
     shader.uniform_int("n_lamps", int(u["n_lamps"]))
     shader.uniform_int("n_objects", int(u["n_objects"]))
 
@@ -239,15 +257,20 @@ def draw_frame(context=None):
         for name, slot, mat_name, u in draws:
             obj, mat = scene.objects[name], bpy.data.materials[mat_name]
             inputs = material_inputs(mat)
-            bkey = (name, slot, tuple(round(x, 6) for row in obj.matrix_world for x in row),
-                    len(obj.data.vertices), inputs["uv"])
+            bkey = batch_key(obj, slot, inputs["uv"])
             batch = cache["batches"].get((name, slot))
             if batch is None or batch[0] != bkey:
                 pos, uv = mesh_arrays(obj, slot, inputs["uv"], depsgraph)
-                batch = (bkey, batch_for_shader(shader, "TRIS", {"pos": pos.tolist(),
-                                                                 "uv": uv.tolist()}))
+                # a slot no face uses (the relit copy is on every slot of its material) draws
+                # nothing: an empty array has no attribute length for batch_for_shader
+                batch = (bkey, batch_for_shader(shader, "TRIS",
+                                                {"pos": draw_handlers.vertex_array(pos),
+                                                 "uv": draw_handlers.vertex_array(uv)})
+                         if len(pos) else None)
                 cache["batches"][(name, slot)] = batch
             used.add((name, slot))
+            if batch[1] is None:
+                continue
             t_tex, m_tex = _textures(inputs)
             used_textures.add(cache["last_texture_key"])
             shader.uniform_sampler("t_image", t_tex)
@@ -261,6 +284,16 @@ def draw_frame(context=None):
         del cache["batches"][k]
     for k in [k for k in cache["textures"] if k not in used_textures]:
         del cache["textures"][k]
+
+
+def retry():
+    """Draw again after a failure (the setting toggled): from new batches and textures."""
+    draw_handlers.retry(cache, batches={}, textures={})
+
+
+def failure():
+    """Why the preview stopped (one line), or None."""
+    return cache["failed"]
 
 
 def is_registered():
