@@ -100,6 +100,13 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                     "show them, with the moving objects' sphere shadows, live while they move "
                     "(nothing to compile; Material Preview and Rendered show the materials "
                     "themselves)")
+    ar_eevee_ground: BoolProperty(
+        name="EEVEE Sees the Photo Below", default=True,
+        description="AR mode: EEVEE lights the objects by the World alone, whose map shows its "
+                    "own ground below the horizon; with this, Set Up AR and Update give EEVEE a "
+                    "World output that shows the photo there, projected onto the receivers' "
+                    "ground, as Cycles sees it (the World's own output stays Cycles'). Costs "
+                    "EEVEE a heavier World shader")
     cycles_shadows: EnumProperty(
         name="Cycles Moving Shadows", default="RAYS",
         items=(("RAYS", "Rays", "Cycles casts rays towards the lamps against the moving objects' "

@@ -42,6 +42,9 @@ class RELIGHT_PT_ar(_RelightPanel, bpy.types.Panel):
         row.scale_y = 1.2
         row.operator("relight.ar_setup", icon='CAMERA_DATA')
         row.operator("relight.update", icon='FILE_REFRESH')
+        settings = getattr(scene, "relight", None)
+        if settings is not None:
+            layout.prop(settings, "ar_eevee_ground")
         lines = status_lines(scene)
         width = _width(context)
         if not lines:

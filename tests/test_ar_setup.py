@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+from mathutils import Vector  # noqa: E402
 
 import ar_composite_scenes as S  # noqa: E402
 from blendstate import user_state  # noqa: E402
@@ -63,6 +64,134 @@ def test_setup_writes_the_composite(tmp_path):
         {k: v for k, v in before["slots"].items() if k != "Ground"}
     st = ar.state(sc)
     assert st["objects"] == [ob.name] and st["receivers"] == ["Ground"] and st["lights"]
+
+
+def _world_outputs(tree):
+    return [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+
+
+def test_eevee_sees_the_photo_below_the_horizon(tmp_path):
+    """EEVEE lights the object by the World alone: Set Up gives it a World output of its own
+    (ar_write.write_world) whose ground group shows the photo below the horizon, from the
+    object's centre (driven: moved, turned or scaled, it needs no Update); Cycles keeps the
+    World's own output, an Update leaves one such output, and Clear the World as it was."""
+    sc, ob = build(tmp_path)
+    tree = sc.world.node_tree
+    own = _world_outputs(tree)
+    assert [n.target for n in own] == ["ALL"]
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ar_write = ar_module("ar_write")
+    ours = tree.nodes[ar_write.WORLD_OUTPUT]
+    assert tree.get_output_node("EEVEE") == ours and tree.get_output_node("CYCLES") == own[0]
+    assert own[0].target == "ALL"
+    group = tree.nodes[ar_write.WORLD_GROUP_NODE]
+    assert ours.inputs["Surface"].links[0].from_node == group
+    assert group.inputs["Surface"].links[0].from_socket == \
+        own[0].inputs["Surface"].links[0].from_socket
+    assert group.node_tree.nodes.get("Photo").image == \
+        sc.camera.data.background_images[0].image
+
+    def origin():
+        bpy.context.view_layer.update()
+        dg = bpy.context.evaluated_depsgraph_get()
+        ev = sc.world.evaluated_get(dg).node_tree.nodes[ar_write.WORLD_GROUP_NODE]
+        return np.array(ev.inputs["Origin"].default_value)
+
+    def centre():
+        c = np.array([ob.matrix_world @ Vector(v) for v in ob.bound_box])
+        return 0.5 * (c.min(axis=0) + c.max(axis=0))
+
+    assert np.abs(origin() - centre()).max() < 1e-4
+    ob.location.x += 0.4
+    ob.rotation_euler = (0.3, -0.2, 0.7)
+    ob.scale = (1.2, 0.8, 1.1)
+    assert np.abs(origin() - centre()).max() < 1e-4
+    # the ground's height and extent: the receiver's
+    ground = importlib.import_module(f"{PACKAGE}.relight_addon.core.ar.ground")
+    floor = bpy.data.objects["Ground"]
+    floor.data.calc_loop_triangles()
+    tri = np.array([[floor.matrix_world @ floor.data.vertices[i].co for i in t.vertices]
+                    for t in floor.data.loop_triangles])
+    height, (x0, x1, y0, y1) = ground.ground_plane(tri, centre()[2])
+    assert abs(height - tri[:, :, 2].mean()) < 1e-6
+    assert np.allclose((x0, x1, y0, y1), (tri[:, :, 0].min(), tri[:, :, 0].max(),
+                                          tri[:, :, 1].min(), tri[:, :, 1].max()))
+    assert any(n.bl_idname == "ShaderNodeMath" and n.operation == "SUBTRACT" and
+               abs(n.inputs[0].default_value - height) < 1e-6 for n in group.node_tree.nodes)
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert len(_world_outputs(tree)) == 2 and \
+        len([n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup"]) == 1
+    assert bpy.ops.relight.ar_clear() == {"FINISHED"}
+    assert _world_outputs(tree) == own and own[0].target == "ALL" and own[0].is_active_output
+    assert ar_write.WORLD_GROUP_NODE not in tree.nodes and ar_write.WORLD_SAVED not in sc.world
+    assert tree.get_output_node("EEVEE") == own[0]
+
+
+def test_the_eevee_ground_can_be_switched_off(tmp_path):
+    """With the setting off, Set Up leaves the World as it was; switched on, Update writes
+    EEVEE's output."""
+    sc, ob = build(tmp_path)
+    before = snapshot()["world_nodes"]
+    sc.relight.ar_eevee_ground = False
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    assert snapshot()["world_nodes"] == before
+    sc.relight.ar_eevee_ground = True
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    assert ar_module("ar_write").WORLD_OUTPUT in sc.world.node_tree.nodes
+
+
+@pytest.mark.parametrize("layout", ["ALL+EEVEE", "CYCLES+EEVEE"])
+def test_a_world_with_outputs_per_engine(tmp_path, layout):
+    """A World that already has an EEVEE output of its own (beside one for all, or one for
+    Cycles, that one active): EEVEE's goes through the ground group, Cycles keeps its output,
+    and Clear gives back the World as it was, its active output too."""
+    sc, ob = build(tmp_path)
+    tree = sc.world.node_tree
+    first = _world_outputs(tree)[0]
+    source = first.inputs["Surface"].links[0].from_socket
+    first.target = layout.split("+")[0]
+    eevee = tree.nodes.new("ShaderNodeOutputWorld")
+    eevee.target = "EEVEE"
+    mix = tree.nodes.new("ShaderNodeAddShader")          # EEVEE's own shader
+    tree.links.new(source, mix.inputs[0])
+    tree.links.new(mix.outputs[0], eevee.inputs["Surface"])
+    first.is_active_output = True
+    before = snapshot()["world_nodes"]
+    cycles = tree.get_output_node("CYCLES")
+    assert tree.get_output_node("EEVEE") == eevee
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    ar_write = ar_module("ar_write")
+    ours = tree.nodes[ar_write.WORLD_OUTPUT]
+    group = tree.nodes[ar_write.WORLD_GROUP_NODE]
+    assert tree.get_output_node("EEVEE") == ours and tree.get_output_node("CYCLES") == cycles
+    assert group.inputs["Surface"].links[0].from_node == mix
+    assert bpy.ops.relight.ar_clear() == {"FINISHED"}
+    assert snapshot()["world_nodes"] == before
+    assert tree.get_output_node("EEVEE") == eevee and tree.get_output_node("CYCLES") == cycles
+
+
+def test_another_world_after_set_up(tmp_path):
+    """The scene given another World after Set Up: Update leaves the first as it was and
+    writes the new one; Clear leaves both as they were."""
+    sc, ob = build(tmp_path)
+    first = sc.world
+    before = snapshot()["world_nodes"]
+    assert bpy.ops.relight.ar_setup() == {"FINISHED"}
+    other = first.copy()
+    ar_write = ar_module("ar_write")
+    for n in [n for n in other.node_tree.nodes if n.get(ar_write.WORLD_TAG) is not None]:
+        other.node_tree.nodes.remove(n)
+    if ar_write.WORLD_SAVED in other:
+        del other[ar_write.WORLD_SAVED]
+    other.name = "Other World"
+    sc.world = other
+    assert bpy.ops.relight.update() == {"FINISHED"}
+    now = snapshot()["world_nodes"]
+    assert now[first.name] == before[first.name]
+    assert ar_write.WORLD_OUTPUT in other.node_tree.nodes
+    assert bpy.ops.relight.ar_clear() == {"FINISHED"}
+    assert ar_write.WORLD_OUTPUT not in other.node_tree.nodes
+    assert snapshot()["world_nodes"][first.name] == before[first.name]
 
 
 def _driven_centres(group):
@@ -189,7 +318,8 @@ def test_clear_puts_everything_back(tmp_path):
     assert bpy.ops.relight.ar_clear() == {"FINISHED"}
     after = snapshot()
     # the photo was packed by Set Up (farm-safe) and stays so; the scene key stays
-    for k in ("objects", "meshes", "materials", "node_groups", "worlds", "slots", "settings"):
+    for k in ("objects", "meshes", "materials", "node_groups", "worlds", "slots", "settings",
+              "world_nodes"):
         assert after[k] == before[k], k
     assert {n for n in after["images"]} == {n for n in before["images"]}
     assert not ar_module("ar").is_set_up(sc)
@@ -232,6 +362,10 @@ class _Layout:
         assert hasattr(getattr(bpy.ops, module), name), idname
         self.log.append(("operator", idname))
 
+    def prop(self, data, name, **_):
+        assert hasattr(data, name), name
+        self.log.append(("prop", name))
+
     def column(self, **_):
         return self
 
@@ -271,7 +405,9 @@ def test_every_driver_is_a_simple_expression(tmp_path):
     key = ids.scene_key(sc)
     owners = [g for g in bpy.data.node_groups if ids.ours(g, key)]
     owners += [m.node_tree for m in bpy.data.materials if ids.ours(m, key) and m.node_tree]
+    owners += [w.node_tree for w in bpy.data.worlds if w.node_tree]     # EEVEE's ground
     drivers = [fc for o in owners if o.animation_data for fc in o.animation_data.drivers]
+    assert any("Relight AR Ground" in fc.data_path for fc in drivers)
     assert len(drivers) >= 3 * 8                     # at least the spheres' centres
     for fc in drivers:
         assert fc.driver.type == "SCRIPTED" and fc.driver.is_simple_expression, \

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.ar.ground import ground_plane
 from . import ar_draw, ar_nodes, ar_read, ar_write, ids
 from .images import MapWriter
 from .pipeline import Outcome, PipelineError
@@ -213,6 +214,13 @@ def _remove_groups(key):
         bpy.data.node_groups.remove(ng)
 
 
+def _centre(o):
+    """The middle (3,) of object input ``o``'s world bounding box."""
+    m = np.array(o.obj.matrix_world, float)
+    p = o.triangles.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    return 0.5 * (p.min(axis=0) + p.max(axis=0)) if len(p) else m[:3, 3]
+
+
 def write(context, job, result) -> Outcome:
     """Write ``job``'s AR composite into ``context.scene`` (see ar_write.py)."""
     from ..core.ar.env_shadow import residual_floor
@@ -240,6 +248,7 @@ def write(context, job, result) -> Outcome:
     lights = ar_write.light_terms(st["lights"])
     bands, rows = int(st["bands"]), int(st["rows"])
     ar_write.restore_receivers(scene, key)
+    ar_write.restore_world(key)
     ar_write.clear_compositor(scene)
     _remove_groups(key)
     camera = ar_nodes.camera_group(scene, inp.camera, key)
@@ -253,6 +262,15 @@ def write(context, job, result) -> Outcome:
                                      float(st["floor"]), shadows, view)
     ar_write.add_aovs(scene)
     slots = ar_write.write_receivers(scene, inp.receivers, camera, inp.photo, key)
+    # EEVEE's World: the ground under the lowest object, seen from its centre
+    wanted = getattr(getattr(scene, "relight", None), "ar_eevee_ground", True)
+    lowest = min(inp.objects, key=lambda o: _centre(o)[2]) if inp.objects and wanted else None
+    plane = ground_plane(inp.receiver_triangles, _centre(lowest)[2], at=_centre(lowest)[:2]) \
+        if lowest is not None else None
+    why = ar_write.write_world(scene, inp.model, inp.photo, plane,
+                               lowest.obj if lowest is not None else None, key)
+    if why:
+        warnings.append(why)
     ar_write.write_compositor(scene, group, key)
     saved = dict(st.get("saved", {}))
     changed = ar_write.apply_settings(scene, saved)
@@ -278,6 +296,7 @@ def write(context, job, result) -> Outcome:
         message += f"; render settings set: {', '.join(changed)}"
     ar_draw.retry()     # the viewport's shadows draw again from the new data, even after a failure
     summary = {"receivers": len(inp.receivers), "objects": len(inp.objects), "slots": slots,
+               "eevee_ground": ar_write.has_world(scene, key),
                "spheres": spheres, "lights": len(lights), "seconds": dict(result.seconds),
                "total_seconds": time.perf_counter() - job.t0}
     return Outcome(message, warnings, "ar", summary)
@@ -298,6 +317,7 @@ def clear(scene) -> dict:
     st = state(scene)
     if key is not None:
         ar_write.restore_receivers(scene, key)
+        ar_write.restore_world(key)
         _remove_groups(key)
         for img in [i for i in bpy.data.images if ids.ours(i, key) and i.get(STATE)]:
             bpy.data.images.remove(img)

@@ -91,6 +91,17 @@ def _group(name, kind, inputs, outputs, key, tree_type=COMPOSITOR):
     return ng, gin, gout, Builder(ng)
 
 
+def world_group(key, inputs, outputs):
+    """The World's ground group of the scene with ``key`` (ar_write.ground_group): (group,
+    input node, output node, Builder), Builder None when it is made already."""
+    return _group("Relight AR Ground", "ground", inputs, outputs, key, "ShaderNodeTree")
+
+
+def separate(b, v):
+    """The x, y, z outputs of a Separate XYZ of ``v``."""
+    return _sep(b, v)
+
+
 def _clamped(sock):
     sock.node.use_clamp = True
     return sock

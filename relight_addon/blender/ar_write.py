@@ -12,8 +12,11 @@ differential composite, the render settings it needs.
   output: of the scene's compositing node group if it has one (inserted after the Render
   Layers' Image, undone by clear), else of a new one.
 * The virtual objects keep their own materials: the render engine lights them with the World
-  (diffuse, glossy, their occlusion) and they see the receivers' photo around them; the World
-  is left as it is.
+  (diffuse, glossy, their occlusion) and they see the receivers' photo around them.  EEVEE
+  lights them by the World alone (its world probe), which below the horizon shows the map's
+  own ground where Cycles' rays meet the receivers: the World's output is kept for Cycles and
+  a second one, for EEVEE, shows the photo projected onto the ground there (write_world,
+  core/ar/ground.py); Clear removes it.
 * Render settings: the Standard view transform (the photo must come out as it went in) and a
   transparent film (the photo is put behind in the compositor).  Their previous values are
   remembered.
@@ -22,8 +25,10 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+from mathutils import Vector
 
 from . import ar_nodes, ids, materials
+from .drivers import add_driver, frame_vars, world_point_expressions
 from .nodes import Builder
 
 AR_MATERIAL = "relight_ar_material"     # on a receiver's AR material: "receiver"
@@ -144,6 +149,150 @@ def restore_receivers(scene, key):
             del obj[ADDED_SLOT]
     for m in old:
         bpy.data.materials.remove(m)
+
+
+# -- the World EEVEE sees ------------------------------------------------------------------------
+
+WORLD_OUTPUT = "Relight AR World (EEVEE)"   # the World output node made here (target EEVEE)
+WORLD_GROUP_NODE = "Relight AR Ground"      # its group node
+WORLD_SAVED = "relight_ar_world"            # on the World: the scene key, its active outputs
+WORLD_TAG = "relight_ar_world_node"         # on the nodes made here: the scene key
+SHADER = "NodeSocketShader"
+
+
+def ground_group(key, model, photo, plane):
+    """``"Relight AR Ground"`` (a shader group for the World): Surface (the World's shader),
+    Origin (the object's centre) -> Surface: below the horizon, where the direction from Origin
+    meets the ground rectangle ``plane`` (core/ar/ground.py) in the photo's frame, the photo
+    there (a Background of its colour, as the receivers emit it); elsewhere the World's own.
+    The photo's frame is that of the camera ``model`` (core/ar/view.py) as constants: the
+    receivers' driven camera group in the World made EEVEE's renders last minutes on
+    llvmpipe, and the World's ground waits for Update after a camera move."""
+    height, (x0, x1, y0, y1) = plane
+    ng, gin, gout, b = ar_nodes.world_group(key, [("Surface", SHADER),
+                                                  ("Origin", "NodeSocketVector")],
+                                            [("Surface", SHADER)])
+    if b is None:
+        return ng
+    coord = b.node("ShaderNodeTexCoord")
+    d = b.vmath("NORMALIZE", coord.outputs["Generated"])
+    dz = ar_nodes.separate(b, d)[2]
+    oz = ar_nodes.separate(b, gin.outputs["Origin"])[2]
+    b.column()
+    # t = (height - Origin_z) / d_z along directions going down (d_z < 0: t > 0 over the ground)
+    t = b.math("DIVIDE", b.math("SUBTRACT", height, oz), b.math("MINIMUM", dz, -1e-6))
+    hit = b.vmath("ADD", gin.outputs["Origin"], b.vmath("SCALE", d, scale=t))
+    hx, hy = ar_nodes.separate(b, hit)[:2]
+    b.column()
+    # the camera frame q = (p - o) R (view.CameraModel.to_camera), u and v as project() has them
+    m = np.asarray(model.matrix, float)
+    r = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0, keepdims=True), 1e-300)
+    o = m[:3, 3]
+    q = [b.math("SUBTRACT", b.vmath("DOT_PRODUCT", hit, tuple(r[:, j])), float(o @ r[:, j]))
+         for j in range(3)]
+    depth = b.math("MULTIPLY", q[2], -1.0)
+    front = b.math("GREATER_THAN", depth, 1e-6)
+    safe = b.math("MAXIMUM", depth, 1e-6)
+    a_u, a_v, b_u, b_v = model.factors()
+    u = b.math("MULTIPLY_ADD", b.math("DIVIDE", q[0], safe), a_u, 0.5 - b_u)
+    v = b.math("MULTIPLY_ADD", b.math("DIVIDE", q[1], safe), a_v, 0.5 - b_v)
+    b.column()
+    tests = [b.math("LESS_THAN", dz, -1e-4), b.math("GREATER_THAN", oz, height), front]
+    for value, lo, hi in ((hx, x0, x1), (hy, y0, y1), (u, 0.0, 1.0), (v, 0.0, 1.0)):
+        tests += [b.math("GREATER_THAN", value, lo), b.math("LESS_THAN", value, hi)]
+    seen = tests[0]
+    for other in tests[1:]:
+        seen = b.math("MULTIPLY", seen, other)
+    b.column()
+    uv = b.node("ShaderNodeCombineXYZ")
+    b.link(u, uv.inputs[0])
+    b.link(v, uv.inputs[1])
+    tex = b.node("ShaderNodeTexImage", "Photo", image=photo, interpolation="Linear",
+                 extension="EXTEND")
+    b.link(uv.outputs[0], tex.inputs["Vector"])
+    bg = b.node("ShaderNodeBackground")
+    b.link(tex.outputs["Color"], bg.inputs["Color"])
+    b.column()
+    mix = b.node("ShaderNodeMixShader")
+    b.link(seen, mix.inputs[0])
+    b.link(gin.outputs["Surface"], mix.inputs[1])
+    b.link(bg.outputs[0], mix.inputs[2])
+    b.link(mix.outputs[0], gout.inputs["Surface"])
+    return ng
+
+
+def write_world(scene, model, photo, plane, obj, key):
+    """EEVEE's World: the shader EEVEE rendered the World with, through ``ground_group`` (the
+    photo below the horizon), in a World output of its own targeted at EEVEE (Blender renders
+    each engine with the output of its own target before one for all); Cycles keeps its output
+    as it was.  Origin follows the middle of ``obj``'s bounding box (drivers: the object moved,
+    turned or scaled needs no Update; the ground's rectangle is Update's).  Returns a warning
+    (one sentence) or None; nothing is written without a ground ``plane``, or where the World
+    is not the scene's to change."""
+    restore_world(key)
+    world = scene.world
+    tree = world.node_tree if world is not None else None
+    if tree is None or obj is None:
+        return None
+    if plane is None:
+        return ("EEVEE: no receiver faces up under the objects, so below the horizon they see "
+                "the environment map's own ground, not the photo's (Cycles sees the receivers)")
+    if world.library is not None or not getattr(world, "is_editable", True):
+        return (f"EEVEE: the World '{world.name}' is linked from a library, so below the "
+                "horizon the objects see the environment map's own ground, not the photo's")
+    src = tree.get_output_node("EEVEE")
+    if src is None or not src.inputs["Surface"].is_linked:
+        return None
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+    world[WORLD_SAVED] = {"key": key,
+                          "active": "\n".join(n.name for n in outputs if n.is_active_output)}
+    b = Builder(tree, src.location.x, src.location.y - 300)
+    g = ar_nodes.group_node(b, ground_group(key, model, photo, plane))
+    g.name = g.label = WORLD_GROUP_NODE
+    g[WORLD_TAG] = key
+    b.link(src.inputs["Surface"].links[0].from_socket, g.inputs["Surface"])
+    corners = np.array([tuple(c) for c in obj.bound_box], float)
+    local = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
+    for i, expr in enumerate(world_point_expressions(local)):
+        add_driver(g.inputs["Origin"], expr, frame_vars(obj), index=i)
+    b.column()
+    new = b.node("ShaderNodeOutputWorld", WORLD_OUTPUT, target="EEVEE")
+    new[WORLD_TAG] = key
+    b.link(g.outputs["Surface"], new.inputs["Surface"])
+    if src.inputs["Volume"].is_linked:
+        b.link(src.inputs["Volume"].links[0].from_socket, new.inputs["Volume"])
+    if src.target == "EEVEE":       # the user's own EEVEE output: ours must be the active one
+        new.is_active_output = True
+    users = [s.name for s in bpy.data.scenes if s.world == world and s != scene]
+    if users:
+        return (f"EEVEE: the World '{world.name}' is also the World of {', '.join(users)}: "
+                "there EEVEE's World shows this scene's photo below the horizon too (give this "
+                "scene a World of its own to keep theirs)")
+    return None
+
+
+def restore_world(key):
+    """Every World as it was before write_world for the scene with ``key``: our nodes removed
+    (their drivers with them), the outputs that were active active again."""
+    for world in bpy.data.worlds:
+        tree = world.node_tree
+        if tree is None:
+            continue
+        for node in [n for n in tree.nodes if n.get(WORLD_TAG) == key]:
+            tree.nodes.remove(node)
+        saved = world.get(WORLD_SAVED)
+        if saved is not None and saved.get("key") == key:
+            for name in str(saved.get("active", "")).split("\n"):
+                node = tree.nodes.get(name) if name else None
+                if node is not None:
+                    node.is_active_output = True
+            del world[WORLD_SAVED]
+
+
+def has_world(scene, key) -> bool:
+    """Whether the scene's World has the EEVEE output of write_world."""
+    tree = scene.world.node_tree if scene.world is not None else None
+    return tree is not None and any(n.get(WORLD_TAG) == key for n in tree.nodes)
 
 
 # -- the view layer's passes and the compositor -------------------------------------------------

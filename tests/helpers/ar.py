@@ -60,6 +60,20 @@ def build(tmp_path, hdri="sunrise"):
     return sc, ob
 
 
+def _world_state(world):
+    """A World's nodes (name, type, target, active), links, drivers and ID properties."""
+    tree = world.node_tree
+    if tree is None:
+        return None, sorted(world.keys())
+    nodes = sorted((n.name, n.bl_idname, getattr(n, "target", None),
+                    getattr(n, "is_active_output", None)) for n in tree.nodes)
+    links = sorted((lk.from_node.name, lk.from_socket.identifier, lk.to_node.name,
+                    lk.to_socket.identifier) for lk in tree.links)
+    drivers = sorted(fc.data_path for fc in tree.animation_data.drivers) \
+        if tree.animation_data else []
+    return nodes, links, drivers, sorted(world.keys())
+
+
 def snapshot():
     """Everything a failed Set Up must leave as it was."""
     sc = bpy.context.scene
@@ -74,4 +88,5 @@ def snapshot():
                        getattr(getattr(sc, "compositing_node_group", None), "name", None),
                        [a.name for layer in sc.view_layers for a in layer.aovs])
     out["user"] = user_state(bpy)
+    out["world_nodes"] = {w.name: _world_state(w) for w in bpy.data.worlds}
     return out
