@@ -68,11 +68,9 @@ class Quality:
 
 
 PRESETS = {
-    # draft: at about the peer's default cost (results/cornell.md); its thresholds and 2 x 2
-    # finer form-factor points are where the Cornell box's worst patch stays lowest for the CPU
-    "draft": Quality("draft", eps_bf=0.015, eps_bfv=0.0075, min_area=2e-3, quadrature=1, rays=8,
+    "draft": Quality("draft", eps_bf=0.01, eps_bfv=0.005, min_area=2e-3, quadrature=1, rays=8,
                      oracle_rays=8, passes=2, separation=0.4, exitance_bias=0.10,
-                     proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=2,
+                     proxy_faces=1000, split_levels=3, split_near=0.15, ff_quadrature=3,
                      gap_levels=2, partial_rays=32, contact_levels=1,
                      partial_point_rays=8),
     "medium": Quality("medium", eps_bf=0.002, eps_bfv=0.003, min_area=3e-4, quadrature=2,
