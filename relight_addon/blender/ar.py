@@ -264,9 +264,10 @@ def write(context, job, result) -> Outcome:
     slots = ar_write.write_receivers(scene, inp.receivers, camera, inp.photo, key)
     # EEVEE's World: the ground under the lowest object, seen from its centre
     wanted = getattr(getattr(scene, "relight", None), "ar_eevee_ground", True)
-    lowest = min(inp.objects, key=lambda o: _centre(o)[2]) if inp.objects and wanted else None
-    plane = ground_plane(inp.receiver_triangles, _centre(lowest)[2], at=_centre(lowest)[:2]) \
-        if lowest is not None else None
+    lowest, plane = None, None
+    if inp.objects and wanted:
+        centre, lowest = min(((_centre(o), o) for o in inp.objects), key=lambda co: co[0][2])
+        plane = ground_plane(inp.receiver_triangles, centre[2], at=centre[:2])
     why = ar_write.write_world(scene, inp.model, inp.photo, plane,
                                lowest.obj if lowest is not None else None, key)
     if why:

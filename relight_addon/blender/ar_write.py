@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
-from mathutils import Vector
 
 from . import ar_nodes, ids, materials
 from .drivers import add_driver, frame_vars, world_point_expressions
